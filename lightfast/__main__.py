@@ -1,0 +1,3 @@
+from lightfast.cli import main
+
+raise SystemExit(main())

@@ -1,0 +1,28 @@
+"""rosbag2 bags without the ros2 CLI: read (MCAP and sqlite3), write MCAP atomically, inspect and compare.
+
+This package is ROS-free (rosbags and mcap only); replaying onto and recording from live topics is in
+:mod:`lightfast.ros.player` and :mod:`lightfast.ros.recorder`.
+"""
+from lightfast.bag.compare import BagComparison, TopicComparison, compare_bags
+from lightfast.bag.errors import BagError, BagExistsError, BagFormatError, BagNotFoundError, UnknownMessageTypeError
+from lightfast.bag.reader import BagInfo, BagMessage, BagReader, TopicInfo, open_bag
+from lightfast.bag.writer import BagWriter, default_typestore, make_qos
+
+__all__ = [
+    "BagComparison",
+    "BagError",
+    "BagExistsError",
+    "BagFormatError",
+    "BagInfo",
+    "BagMessage",
+    "BagNotFoundError",
+    "BagReader",
+    "BagWriter",
+    "TopicComparison",
+    "TopicInfo",
+    "UnknownMessageTypeError",
+    "compare_bags",
+    "default_typestore",
+    "make_qos",
+    "open_bag",
+]

@@ -1,0 +1,251 @@
+"""``lightfast``: the command line. Each subcommand is a thin wrapper over a library function.
+
+Exit codes: 0 success; 1 a lightfast error (one line on stderr, no traceback; ``LIGHTFAST_DEBUG=1`` shows it);
+2 bad usage; 3 an unexpected internal error; 4 ``bag compare`` found differences; 130 interrupted.
+"""
+from __future__ import annotations
+
+import argparse
+import logging
+import os
+import signal
+import sys
+import threading
+import time
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
+from pathlib import Path
+
+from lightfast.errors import LightfastError
+
+EXIT_ERROR, EXIT_USAGE, EXIT_INTERNAL, EXIT_DIFFERENT, EXIT_INTERRUPTED = 1, 2, 3, 4, 130
+log = logging.getLogger("lightfast")
+
+
+@contextmanager
+def _stop_on_signals() -> Iterator[threading.Event]:
+    """An event set by SIGINT or SIGTERM while the block runs (previous handlers restored after)."""
+    stop = threading.Event()
+    previous = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+
+    def handler(signum: int, _frame: object) -> None:
+        if stop.is_set() and signum == signal.SIGINT:
+            raise KeyboardInterrupt  # a second Ctrl-C aborts
+        stop.set()
+
+    for s in previous:
+        signal.signal(s, handler)
+    try:
+        yield stop
+    finally:
+        for s, h in previous.items():
+            signal.signal(s, h)
+
+
+# --- bag ------------------------------------------------------------------------------------------------------
+
+def _cmd_bag_info(args: argparse.Namespace) -> int:
+    from lightfast.bag import open_bag
+
+    with open_bag(args.bag) as bag:
+        print(bag.info.format())
+    return 0
+
+
+def _cmd_bag_play(args: argparse.Namespace) -> int:
+    from lightfast.ros.player import PlayOptions, play_bag
+    from lightfast.ros.runtime import ros_session
+
+    options = PlayOptions(
+        rate=args.rate,
+        loop=args.loop,
+        clock_hz=args.clock or 0.0,
+        topics=tuple(args.topics or ()),
+        start_offset_s=args.start_offset,
+        wait_for_subscribers_s=args.wait_for_subscribers or 0.0,
+        ack_timeout_s=args.ack_timeout,
+        qos_depth=args.qos_depth,
+    )
+    from lightfast.bag import open_bag
+
+    with open_bag(args.bag) as bag, _stop_on_signals() as stop:
+        with ros_session("lightfast_bag_play", domain_id=args.domain_id, install_signal_handlers=False) as (node, _):
+            report = play_bag(bag, node, options, stop=stop)
+    print(report.summary())
+    return 0
+
+
+def _cmd_bag_record(args: argparse.Namespace) -> int:
+    from rclpy.parameter import Parameter
+
+    from lightfast.bag import BagWriter
+    from lightfast.ros.recorder import BagRecorder, drain
+    from lightfast.ros.runtime import ros_session
+
+    topics = None if args.all or not args.topics else args.topics
+    overrides = [Parameter("use_sim_time", value=True)] if args.use_sim_time else []
+    with _stop_on_signals() as stop, ros_session(
+        "lightfast_bag_record", domain_id=args.domain_id, install_signal_handlers=False,
+        parameter_overrides=overrides,
+    ) as (node, executor):
+        writer = BagWriter(args.output, storage=args.storage, overwrite=args.overwrite)
+        recorder = BagRecorder(node, writer, topics=topics)
+        try:
+            print(f"recording {'all topics' if topics is None else ' '.join(topics)} to {args.output} "
+                  "(Ctrl-C to stop)", file=sys.stderr, flush=True)
+            deadline = time.monotonic() + args.max_duration if args.max_duration else float("inf")
+            while not stop.is_set() and time.monotonic() < deadline:
+                executor.spin_once(timeout_sec=0.05)
+                if args.max_messages and recorder.report.message_count >= args.max_messages:
+                    break
+            drain(lambda t: executor.spin_once(timeout_sec=t), lambda: recorder.report.message_count)
+        finally:
+            report = recorder.close()
+    print(report.summary())
+    return 0
+
+
+def _cmd_bag_compare(args: argparse.Namespace) -> int:
+    from lightfast.bag import compare_bags
+
+    result = compare_bags(args.reference, args.other, topics=args.topics)
+    print(result.summary())
+    return 0 if result.identical else EXIT_DIFFERENT
+
+
+# --- data, config, dds ----------------------------------------------------------------------------------------
+
+def _cmd_data_7scenes(args: argparse.Namespace) -> int:
+    from lightfast.data.sevenscenes import convert_7scenes
+
+    path = convert_7scenes(args.src, args.out, first=args.first, count=args.count, rate_hz=args.rate,
+                           overwrite=args.overwrite, progress=sys.stderr.isatty())
+    print(f"wrote {path}")
+    return 0
+
+
+def _cmd_config_write(args: argparse.Namespace) -> int:
+    from lightfast.nodes import write_node_configs
+
+    stale = write_node_configs(Path(args.dir), check=args.check)
+    if args.check and stale:
+        print("out of date (run `lightfast config write`): " + ", ".join(map(str, stale)), file=sys.stderr)
+        return EXIT_ERROR
+    return 0
+
+
+def _cmd_dds_env(_args: argparse.Namespace) -> int:
+    from lightfast.ros.transport import local_transport_env
+
+    for key, value in local_transport_env().items():
+        print(f"export {key}={value}")
+    return 0
+
+
+# --- parser ---------------------------------------------------------------------------------------------------
+
+def _optional_float(default: float) -> dict[str, object]:
+    return dict(nargs="?", type=float, const=default, default=None, metavar="VALUE")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="lightfast", description="lightfast: bag tools, datasets and node configuration.")
+    parser.add_argument("-v", "--verbose", action="store_true", help="log progress details")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    bag = sub.add_parser("bag", help="inspect, play, record and compare rosbag2 bags (MCAP, sqlite3)")
+    bag_sub = bag.add_subparsers(dest="bag_command", required=True, metavar="BAG_COMMAND")
+
+    p = bag_sub.add_parser("info", help="print a bag's topics, types, counts, rates and QoS")
+    p.add_argument("bag", help="bag directory, or its .mcap/.db3 file")
+    p.set_defaults(func=_cmd_bag_info)
+
+    p = bag_sub.add_parser("play", help="publish a bag's messages on live topics")
+    p.add_argument("bag", help="bag directory, or its .mcap/.db3 file")
+    p.add_argument("-r", "--rate", type=float, default=1.0, help="speed factor; 0 = as fast as possible (default 1)")
+    p.add_argument("-l", "--loop", action="store_true", help="play again from the start when the bag ends")
+    p.add_argument("--clock", **_optional_float(40.0),
+                   help="publish /clock for use_sim_time, at VALUE Hz (default 40) and before every message")
+    p.add_argument("--topics", nargs="+", metavar="TOPIC", help="play only these topics")
+    p.add_argument("--start-offset", type=float, default=0.0, metavar="SECONDS", help="skip the first SECONDS")
+    p.add_argument("--wait-for-subscribers", **_optional_float(10.0),
+                   help="wait up to VALUE s (default 10) until every topic has a subscriber")
+    p.add_argument("--ack-timeout", type=float, default=30.0, metavar="SECONDS",
+                   help="at the end wait this long for reliable subscribers to acknowledge (default 30)")
+    p.add_argument("--qos-depth", type=int, default=0, metavar="N", help="KEEP_LAST N instead of KEEP_ALL")
+    p.add_argument("--domain-id", type=int, default=None, help="ROS domain id (default: ROS_DOMAIN_ID or 0)")
+    p.set_defaults(func=_cmd_bag_play)
+
+    p = bag_sub.add_parser("record", help="record live topics into an MCAP bag (Ctrl-C or SIGTERM to stop)")
+    p.add_argument("topics", nargs="*", metavar="TOPIC", help="topics to record (default: all)")
+    p.add_argument("-a", "--all", action="store_true", help="record every topic (except /rosout, /parameter_events)")
+    p.add_argument("-o", "--output", required=True, help="bag directory to create")
+    p.add_argument("-s", "--storage", choices=("mcap", "sqlite3"), default="mcap", help="storage (default mcap)")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing bag at --output")
+    p.add_argument("--max-duration", type=float, default=0.0, metavar="SECONDS", help="stop after SECONDS")
+    p.add_argument("--max-messages", type=int, default=0, metavar="N", help="stop after N messages")
+    p.add_argument("--use-sim-time", action="store_true", help="log times from /clock instead of the system clock")
+    p.add_argument("--domain-id", type=int, default=None, help="ROS domain id (default: ROS_DOMAIN_ID or 0)")
+    p.set_defaults(func=_cmd_bag_record)
+
+    p = bag_sub.add_parser("compare", help="compare two bags topic by topic (exit 4 if they differ)")
+    p.add_argument("reference", help="the reference bag (e.g. what was played)")
+    p.add_argument("other", help="the bag to check (e.g. what was recorded)")
+    p.add_argument("--topics", nargs="+", metavar="TOPIC", help="compare only these topics")
+    p.set_defaults(func=_cmd_bag_compare)
+
+    data = sub.add_parser("data", help="convert public datasets into bags")
+    data_sub = data.add_subparsers(dest="data_command", required=True, metavar="DATASET")
+    p = data_sub.add_parser("7scenes", help="7-Scenes RGB-D frames with ground-truth poses to an MCAP bag")
+    p.add_argument("src", help="folder with frame-NNNNNN.{color.jpg,depth.png,pose.txt} and camera-intrinsics.txt")
+    p.add_argument("out", help="bag directory to create")
+    p.add_argument("--first", type=int, default=0, help="position of the first frame to convert (default 0)")
+    p.add_argument("--count", type=int, default=None, help="number of frames (default all)")
+    p.add_argument("--rate", type=float, default=30.0, help="frame rate of the stamps in Hz (default 30)")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing bag")
+    p.set_defaults(func=_cmd_data_7scenes)
+
+    config = sub.add_parser("config", help="node parameter files")
+    config_sub = config.add_subparsers(dest="config_command", required=True, metavar="CONFIG_COMMAND")
+    p = config_sub.add_parser("write", help="regenerate config/<node>.yaml from the config dataclasses")
+    p.add_argument("--dir", default=str(Path(__file__).resolve().parent.parent / "config"), help="output folder")
+    p.add_argument("--check", action="store_true", help="only check that the files are up to date")
+    p.set_defaults(func=_cmd_config_write)
+
+    dds = sub.add_parser("dds", help="DDS transport settings")
+    dds_sub = dds.add_subparsers(dest="dds_command", required=True, metavar="DDS_COMMAND")
+    p = dds_sub.add_parser("env", help="print the export lines that run nodes by hand with lightfast's profile")
+    p.set_defaults(func=_cmd_dds_env)
+    return parser
+
+
+def run(func: Callable[[argparse.Namespace], int], args: argparse.Namespace) -> int:
+    """Run a subcommand, mapping errors to one line on stderr and an exit code."""
+    debug = bool(os.environ.get("LIGHTFAST_DEBUG"))
+    try:
+        return func(args)
+    except LightfastError as exc:
+        if debug:
+            raise
+        print(f"lightfast: error: {exc}", file=sys.stderr)
+        return EXIT_ERROR
+    except KeyboardInterrupt:
+        print("lightfast: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    except Exception as exc:  # noqa: BLE001 - the CLI's last line of defence
+        if debug:
+            raise
+        print(f"lightfast: internal error: {type(exc).__name__}: {exc} (set LIGHTFAST_DEBUG=1 for the traceback)",
+              file=sys.stderr)
+        return EXIT_INTERNAL
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
+                        format="lightfast: %(levelname)s: %(message)s")
+    return run(args.func, args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

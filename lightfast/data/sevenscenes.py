@@ -1,0 +1,171 @@
+"""Microsoft 7-Scenes RGB-D frames (as in ``../shared/data/7scenes_redkitchen_300``) to a rosbag2 MCAP bag.
+
+Input (see that folder's PROVENANCE.md): ``frame-NNNNNN.color.jpg`` (640×480 RGB), ``frame-NNNNNN.depth.png``
+(16-bit, millimetres; 0 and 65535 invalid), ``frame-NNNNNN.pose.txt`` (4×4 camera-to-world, metres),
+``camera-intrinsics.txt`` (3×3 K) and optionally ``gravity-direction.txt`` (world-frame gravity).
+
+Output topics (one message per frame each, stamped at ``start_ns + i / rate_hz``; 7-Scenes has no timestamps):
+
+========================================  ==========================  ============================================
+topic                                     type                        content
+========================================  ==========================  ============================================
+``/camera/color/image_raw``               sensor_msgs/Image           rgb8
+``/camera/color/camera_info``             sensor_msgs/CameraInfo      K from camera-intrinsics.txt, no distortion
+``/camera/depth/image_raw``               sensor_msgs/Image           16UC1 depth in millimetres, 0 = invalid
+``/camera/depth/camera_info``             sensor_msgs/CameraInfo      same K (the data set treats depth as
+                                                                      registered to colour)
+``/ground_truth/pose``                    geometry_msgs/PoseStamped   ``T_map_camera``: the optical frame in ``map``
+========================================  ==========================  ============================================
+
+Frames: both images are in ``camera_color_optical_frame`` (REP-103 optical: x right, y down, z forward). ``map``
+is the 7-Scenes world frame rotated so that +z points up (against ``gravity-direction.txt``, REP-103/105), with the
+same origin; without a gravity file it is the world frame itself.
+"""
+from __future__ import annotations
+
+import logging
+import os
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+from scipy.spatial.transform import Rotation
+
+from lightfast.bag.writer import BagWriter, make_qos
+from lightfast.camera import PinholeCamera
+from lightfast.errors import LightfastError
+from lightfast.progress import track
+from lightfast.ros.convert import camera_info_from_camera, matrix_to_pose_stamped, numpy_to_image
+from lightfast.ros.msgtypes import rosbags_types
+
+log = logging.getLogger(__name__)
+
+COLOR_TOPIC = "/camera/color/image_raw"
+COLOR_INFO_TOPIC = "/camera/color/camera_info"
+DEPTH_TOPIC = "/camera/depth/image_raw"
+DEPTH_INFO_TOPIC = "/camera/depth/camera_info"
+GT_POSE_TOPIC = "/ground_truth/pose"
+OPTICAL_FRAME = "camera_color_optical_frame"
+MAP_FRAME = "map"
+#: 2013-06-01T12:00:00Z, an arbitrary fixed start (the data set has no timestamps).
+DEFAULT_START_NS = 1_370_088_000 * 10**9
+INVALID_DEPTH_MM = 65535
+_FRAME_RE = re.compile(r"frame-(\d{6})\.color\.(?:jpg|png)$")
+
+
+class DatasetError(LightfastError):
+    """A dataset folder is missing files or holds malformed ones."""
+
+
+@dataclass(frozen=True)
+class SevenScenesFrame:
+    """One RGB-D frame: ``rgb`` (H, W, 3) uint8, ``depth_mm`` (H, W) uint16 with 0 invalid, ``T_world_cam``."""
+
+    index: int
+    rgb: NDArray[np.uint8]
+    depth_mm: NDArray[np.uint16]
+    T_world_cam: NDArray[np.float64]
+
+
+class SevenScenes:
+    """A folder of 7-Scenes frames."""
+
+    def __init__(self, root: str | os.PathLike[str]) -> None:
+        self.root = Path(root)
+        if not self.root.is_dir():
+            raise DatasetError(f"no 7-Scenes folder at {self.root}")
+        self.indices = sorted(int(m.group(1)) for p in self.root.iterdir() if (m := _FRAME_RE.match(p.name)))
+        if not self.indices:
+            raise DatasetError(f"{self.root} holds no frame-NNNNNN.color.jpg files")
+        self.K = self._read_matrix(self.root / "camera-intrinsics.txt", (3, 3))
+        gravity_file = self.root / "gravity-direction.txt"
+        self.T_map_world = np.eye(4)
+        if gravity_file.is_file():
+            gravity = np.loadtxt(gravity_file).reshape(3)
+            up = -gravity / np.linalg.norm(gravity)
+            rot, _ = Rotation.align_vectors([[0.0, 0.0, 1.0]], [up])
+            self.T_map_world[:3, :3] = rot.as_matrix()
+        first = self.frame(self.indices[0])
+        h, w = first.depth_mm.shape
+        self.camera = PinholeCamera.from_matrix(self.K, width=w, height=h)
+
+    @staticmethod
+    def _read_matrix(path: Path, shape: tuple[int, int]) -> NDArray[np.float64]:
+        try:
+            m = np.loadtxt(path)
+        except (OSError, ValueError) as exc:
+            raise DatasetError(f"cannot read {path}: {exc}") from None
+        if m.shape != shape or not np.all(np.isfinite(m)):
+            raise DatasetError(f"{path}: expected a finite {shape[0]}x{shape[1]} matrix, got shape {m.shape}")
+        return m
+
+    def frame(self, index: int) -> SevenScenesFrame:
+        stem = self.root / f"frame-{index:06d}"
+        color_path = stem.with_name(stem.name + ".color.jpg")
+        if not color_path.exists():
+            color_path = stem.with_name(stem.name + ".color.png")
+        bgr = cv2.imread(str(color_path), cv2.IMREAD_COLOR)
+        depth = cv2.imread(str(stem.with_name(stem.name + ".depth.png")), cv2.IMREAD_UNCHANGED)
+        if bgr is None:
+            raise DatasetError(f"cannot read colour image {color_path}")
+        if depth is None or depth.dtype != np.uint16 or depth.ndim != 2:
+            raise DatasetError(f"{stem.name}.depth.png is missing or not a 16-bit single-channel PNG")
+        if depth.shape != bgr.shape[:2]:
+            raise DatasetError(f"{stem.name}: colour {bgr.shape[:2]} and depth {depth.shape} sizes differ")
+        depth = depth.copy()
+        depth[depth == INVALID_DEPTH_MM] = 0
+        T = self._read_matrix(stem.with_name(stem.name + ".pose.txt"), (4, 4))
+        return SevenScenesFrame(index, cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB), depth, T)
+
+    def T_map_cam(self, frame: SevenScenesFrame) -> NDArray[np.float64]:
+        return self.T_map_world @ frame.T_world_cam
+
+
+def convert_7scenes(
+    src: str | os.PathLike[str],
+    out: str | os.PathLike[str],
+    *,
+    first: int = 0,
+    count: int | None = None,
+    rate_hz: float = 30.0,
+    start_ns: int = DEFAULT_START_NS,
+    overwrite: bool = False,
+    progress: bool = False,
+) -> Path:
+    """Write frames ``first .. first+count`` (by position in the folder; default all) of ``src`` as a bag at
+    ``out``. Returns the bag path. The bag appears at ``out`` only when complete."""
+    if rate_hz <= 0:
+        raise DatasetError(f"rate_hz must be > 0, got {rate_hz}")
+    data = SevenScenes(src)
+    indices = data.indices[first : None if count is None else first + count]
+    if not indices:
+        raise DatasetError(f"no frames selected (first={first}, count={count}, {len(data.indices)} available)")
+    types = rosbags_types()
+    sensor_qos = [make_qos(reliable=True, depth=10)]
+    with BagWriter(out, overwrite=overwrite) as bag:
+        for topic, msgtype in (
+            (COLOR_TOPIC, "sensor_msgs/msg/Image"),
+            (COLOR_INFO_TOPIC, "sensor_msgs/msg/CameraInfo"),
+            (DEPTH_TOPIC, "sensor_msgs/msg/Image"),
+            (DEPTH_INFO_TOPIC, "sensor_msgs/msg/CameraInfo"),
+            (GT_POSE_TOPIC, "geometry_msgs/msg/PoseStamped"),
+        ):
+            bag.add_topic(topic, msgtype, offered_qos=sensor_qos)
+        for i, index in enumerate(track(indices, desc="7-Scenes to MCAP", enabled=progress, unit="frame")):
+            frame = data.frame(index)
+            t_ns = start_ns + round(i * 1e9 / rate_hz)
+            header = dict(stamp_ns=t_ns, frame_id=OPTICAL_FRAME, types=types)
+            info = camera_info_from_camera(data.camera, **header)
+            bag.write_message(COLOR_TOPIC, t_ns, numpy_to_image(frame.rgb, "rgb8", **header))
+            bag.write_message(COLOR_INFO_TOPIC, t_ns, info)
+            bag.write_message(DEPTH_TOPIC, t_ns, numpy_to_image(frame.depth_mm, "16UC1", **header))
+            bag.write_message(DEPTH_INFO_TOPIC, t_ns, info)
+            bag.write_message(
+                GT_POSE_TOPIC, t_ns, matrix_to_pose_stamped(data.T_map_cam(frame), stamp_ns=t_ns, frame_id=MAP_FRAME,
+                                                            types=types)
+            )
+    log.info("wrote %d frames of %s to %s", len(indices), src, out)
+    return Path(out)

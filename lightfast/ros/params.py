@@ -1,0 +1,107 @@
+"""ROS parameters generated from a configuration dataclass (see :mod:`lightfast.config`).
+
+:func:`declare_config` declares one parameter per field with its description, bounds and read-only flag, reads
+the values (defaults, ``--ros-args -p``, or a ``--params-file`` made by ``lightfast config write``) and returns the
+validated dataclass. :class:`ConfigParameters` also validates run-time changes: a ``ros2 param set`` that the
+dataclass rejects is refused with the validation message, an accepted one updates :attr:`ConfigParameters.config`.
+"""
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable
+from typing import Any, Generic, TypeVar
+
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+
+from lightfast.config import Config, ConfigError, FieldSpec, config_from_mapping, field_specs
+
+C = TypeVar("C", bound=Config)
+
+_ARRAY_TYPES = {
+    bool: Parameter.Type.BOOL_ARRAY,
+    int: Parameter.Type.INTEGER_ARRAY,
+    float: Parameter.Type.DOUBLE_ARRAY,
+    str: Parameter.Type.STRING_ARRAY,
+}
+_SCALAR_TYPES = {
+    bool: Parameter.Type.BOOL,
+    int: Parameter.Type.INTEGER,
+    float: Parameter.Type.DOUBLE,
+    str: Parameter.Type.STRING,
+}
+
+
+def _descriptor(spec: FieldSpec) -> ParameterDescriptor:
+    desc = ParameterDescriptor(description=spec.describe(), read_only=spec.read_only)
+    if spec.choices is not None:
+        desc.additional_constraints = "one of: " + ", ".join(map(str, spec.choices))
+    has_bounds = spec.min is not None and spec.max is not None
+    if has_bounds and spec.scalar_type is float and not spec.is_tuple:
+        desc.floating_point_range = [FloatingPointRange(from_value=float(spec.min), to_value=float(spec.max))]
+    elif has_bounds and spec.scalar_type is int and not spec.is_tuple:
+        desc.integer_range = [IntegerRange(from_value=int(spec.min), to_value=int(spec.max), step=0)]
+    elif spec.min is not None or spec.max is not None:
+        desc.additional_constraints = (desc.additional_constraints + "; " if desc.additional_constraints else "") + (
+            f"range [{spec.min}, {spec.max}]"
+        )
+    return desc
+
+
+def _from_ros(spec: FieldSpec, value: Any) -> Any:
+    if spec.is_tuple:
+        return () if value is None else tuple(value)
+    return value
+
+
+def declare_config(node: Node, cls: type[C]) -> C:
+    """Declare the parameters of ``cls`` on ``node`` and return the validated configuration.
+
+    Raises :class:`~lightfast.config.ConfigError` naming the parameter when a value is invalid.
+    """
+    values = {}
+    for spec in field_specs(cls):
+        default = list(spec.default) if spec.is_tuple else spec.default
+        if spec.is_tuple and not default:
+            # an empty list carries no type: declare the type explicitly
+            param = node.declare_parameter(spec.name, _ARRAY_TYPES[spec.scalar_type], _descriptor(spec))
+        else:
+            param = node.declare_parameter(spec.name, default, _descriptor(spec))
+        values[spec.name] = _from_ros(spec, param.value)
+    try:
+        return config_from_mapping(cls, values)
+    except ConfigError as exc:
+        raise ConfigError(f"node {node.get_name()}: invalid parameter: {exc}") from None
+
+
+class ConfigParameters(Generic[C]):
+    """A node's configuration kept in sync with its parameters; invalid changes are refused.
+
+    ``on_change(new_config)`` runs after an accepted change.
+    """
+
+    def __init__(self, node: Node, cls: type[C], *, on_change: Callable[[C], None] | None = None) -> None:
+        self.node = node
+        self.cls = cls
+        self.config: C = declare_config(node, cls)
+        self._specs = {s.name: s for s in field_specs(cls)}
+        self._on_change = on_change
+        node.add_on_set_parameters_callback(self._validate)
+        node.add_post_set_parameters_callback(self._apply)
+
+    def _candidate(self, params: list[Parameter]) -> C:
+        changes = {p.name: _from_ros(self._specs[p.name], p.value) for p in params if p.name in self._specs}
+        return dataclasses.replace(self.config, **changes)
+
+    def _validate(self, params: list[Parameter]) -> SetParametersResult:
+        try:
+            self._candidate(params)
+        except (ConfigError, TypeError) as exc:
+            return SetParametersResult(successful=False, reason=str(exc))
+        return SetParametersResult(successful=True)
+
+    def _apply(self, params: list[Parameter]) -> None:
+        self.config = self._candidate(params)
+        if self._on_change is not None:
+            self._on_change(self.config)

@@ -1,0 +1,74 @@
+"""Start and stop rclpy for lightfast's commands and nodes: private context, local transport, clean shutdown."""
+from __future__ import annotations
+
+import importlib
+import os
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
+from typing import Any
+
+import rclpy
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.signals import SignalHandlerOptions
+
+from lightfast.bag.errors import UnknownMessageTypeError
+from lightfast.ros.transport import use_local_transport
+
+
+@contextmanager
+def ros_session(
+    node_name: str,
+    *,
+    domain_id: int | None = None,
+    install_signal_handlers: bool = True,
+    args: list[str] | None = None,
+    parameter_overrides: list[Any] | None = None,
+    shutdown_grace_s: float = 5.0,
+) -> Iterator[tuple[Node, SingleThreadedExecutor]]:
+    """A node on its own context and executor, with lightfast's local DDS transport.
+
+    On exit the node is destroyed and the context shut down. Destroying a node has been seen to hang; if the
+    teardown takes longer than ``shutdown_grace_s`` the process exits (its work is already done by then).
+    """
+    use_local_transport()
+    context = Context()
+    rclpy.init(
+        args=args,
+        context=context,
+        domain_id=domain_id,
+        signal_handler_options=SignalHandlerOptions.ALL if install_signal_handlers else SignalHandlerOptions.NO,
+    )
+    executor = SingleThreadedExecutor(context=context)
+    node = None
+    try:
+        node = Node(node_name, context=context, parameter_overrides=parameter_overrides or [])
+        executor.add_node(node)
+        yield node, executor
+    finally:
+        watchdog = threading.Timer(shutdown_grace_s, os._exit, args=(3,))
+        watchdog.daemon = True
+        watchdog.start()
+        try:
+            executor.shutdown(timeout_sec=1.0)
+            if node is not None:
+                node.destroy_node()
+        finally:
+            rclpy.try_shutdown(context=context)
+            watchdog.cancel()
+
+
+def message_class(msgtype: str) -> type:
+    """The rclpy message class for a type name like ``sensor_msgs/msg/Image``."""
+    parts = msgtype.split("/")
+    if len(parts) != 3 or not all(parts):
+        raise UnknownMessageTypeError(f"malformed message type {msgtype!r} (expected package/msg/Name)")
+    pkg, kind, name = parts
+    try:
+        return getattr(importlib.import_module(f"{pkg}.{kind}"), name)
+    except (ImportError, AttributeError):
+        raise UnknownMessageTypeError(
+            f"message type {msgtype} is not installed here (no Python module {pkg}.{kind} with {name})"
+        ) from None
