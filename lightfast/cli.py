@@ -76,17 +76,14 @@ def _cmd_bag_play(args: argparse.Namespace) -> int:
 
 
 def _cmd_bag_record(args: argparse.Namespace) -> int:
-    from rclpy.parameter import Parameter
-
     from lightfast.bag import BagWriter
     from lightfast.ros.recorder import BagRecorder, drain
     from lightfast.ros.runtime import ros_session
 
     topics = None if args.all or not args.topics else args.topics
-    overrides = [Parameter("use_sim_time", value=True)] if args.use_sim_time else []
     with _stop_on_signals() as stop, ros_session(
         "lightfast_bag_record", domain_id=args.domain_id, install_signal_handlers=False,
-        parameter_overrides=overrides,
+        use_sim_time=args.use_sim_time,
     ) as (node, executor):
         writer = BagWriter(args.output, storage=args.storage, overwrite=args.overwrite)
         recorder = BagRecorder(node, writer, topics=topics)

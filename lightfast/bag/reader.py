@@ -167,7 +167,7 @@ class BagReader:
             storage=storage,
             version=version,
             start_ns=r.start_time if count else 0,
-            end_ns=r.end_time if count else 0,
+            end_ns=r.end_time - 1 if count else 0,  # rosbags reports the exclusive end
             message_count=count,
             size_bytes=sum(p.stat().st_size for p in files),
             topics=tuple(sorted(topics, key=lambda t: t.name)),

@@ -6,12 +6,12 @@ import os
 import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
-from typing import Any
 
 import rclpy
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from rclpy.signals import SignalHandlerOptions
 
 from lightfast.bag.errors import UnknownMessageTypeError
@@ -25,7 +25,7 @@ def ros_session(
     domain_id: int | None = None,
     install_signal_handlers: bool = True,
     args: list[str] | None = None,
-    parameter_overrides: list[Any] | None = None,
+    use_sim_time: bool = False,
     shutdown_grace_s: float = 5.0,
 ) -> Iterator[tuple[Node, SingleThreadedExecutor]]:
     """A node on its own context and executor, with lightfast's local DDS transport.
@@ -44,7 +44,8 @@ def ros_session(
     executor = SingleThreadedExecutor(context=context)
     node = None
     try:
-        node = Node(node_name, context=context, parameter_overrides=parameter_overrides or [])
+        overrides = [Parameter("use_sim_time", value=True)] if use_sim_time else []
+        node = Node(node_name, context=context, parameter_overrides=overrides)
         executor.add_node(node)
         yield node, executor
     finally:

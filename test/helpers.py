@@ -1,0 +1,51 @@
+"""Helpers shared by tests: bounded subprocesses and in-process ROS sessions."""
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
+from pathlib import Path
+
+from lightfast.ros.transport import local_transport_env
+
+LIGHTFAST = [sys.executable, "-m", "lightfast"]
+
+
+def child_env(domain_id: int, **extra: str) -> dict[str, str]:
+    """Environment for a child process on ``domain_id`` with the local transport (discovery LOCALHOST)."""
+    env = dict(os.environ)
+    env.update(local_transport_env(discovery_range="LOCALHOST", domain_id=domain_id))
+    env.update(extra)
+    return env
+
+
+@contextmanager
+def bounded_process(
+    cmd: Sequence[str], *, timeout_s: float, env: dict[str, str] | None = None, cwd: Path | None = None,
+    stdout: int | None = subprocess.PIPE, stderr: int | None = subprocess.PIPE, kill_after_s: float = 5.0,
+) -> Iterator[subprocess.Popen[str]]:
+    """Start ``cmd`` under ``timeout -k`` in its own process group; whatever happens, it cannot outlive
+    ``timeout_s + kill_after_s``, and leaving the block kills the whole group."""
+    wrapped = ["timeout", "-k", f"{kill_after_s:g}", f"{timeout_s:g}", *cmd]
+    proc = subprocess.Popen(wrapped, env=env, cwd=cwd, stdout=stdout, stderr=stderr, text=True,
+                            start_new_session=True)
+    try:
+        yield proc
+    finally:
+        if proc.poll() is None:
+            try:
+                os.killpg(proc.pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+        proc.wait(timeout=kill_after_s + 5)
+
+
+def run_bounded(cmd: Sequence[str], *, timeout_s: float, env: dict[str, str] | None = None,
+                input_text: str | None = None) -> subprocess.CompletedProcess[str]:
+    """Run ``cmd`` to completion under ``timeout -k``; returns its result (stdout/stderr as text)."""
+    with bounded_process(cmd, timeout_s=timeout_s, env=env) as proc:
+        out, err = proc.communicate(input=input_text, timeout=timeout_s + 15)
+    return subprocess.CompletedProcess(proc.args, proc.returncode, out, err)

@@ -1,0 +1,85 @@
+from dataclasses import dataclass
+
+import pytest
+import yaml
+
+from lightfast.config import Config, ConfigError, config_from_mapping, config_yaml, field_specs, load_config_yaml, param
+from lightfast.io import write_text_atomic
+
+
+@dataclass(frozen=True)
+class SampleConfig(Config):
+    chunk_size: int = param(2000, description="Vertices per chunk.", min=1, max=10**6)
+    period_s: float = param(1.0, description="Update period in seconds.", min=0.0)
+    mode: str = param("fast", description="Solver.", choices=("fast", "exact"))
+    enabled: bool = param(True, description="Run at all.")
+    weights: tuple[float, ...] = param((1.0, 2.0), description="Per-channel weights.", min=0.0)
+    names: tuple[str, ...] = param((), description="Topic names.", read_only=True)
+
+    def check(self) -> None:
+        if self.mode == "exact" and self.chunk_size > 1000:
+            raise ConfigError("mode=exact needs chunk_size <= 1000")
+
+
+def test_defaults_and_coercion() -> None:
+    cfg = SampleConfig(period_s=2, weights=[3, 4])  # type: ignore[arg-type]
+    assert cfg.period_s == 2.0 and isinstance(cfg.period_s, float)
+    assert cfg.weights == (3.0, 4.0)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"chunk_size": 0}, "chunk_size=0 is below its minimum 1"),
+        ({"chunk_size": 1.5}, "chunk_size must be int"),
+        ({"enabled": 1}, "enabled must be bool"),
+        ({"mode": "slow"}, "mode='slow' is not one of"),
+        ({"period_s": float("nan")}, "period_s must be a number"),
+        ({"weights": (1.0, -1.0)}, r"weights\[1\]=-1.0 is below"),
+        ({"weights": "1,2"}, "weights must be a list of float"),
+        ({"mode": "exact"}, "mode=exact needs chunk_size <= 1000"),
+    ],
+)
+def test_invalid_values_name_the_field(kwargs: dict, match: str) -> None:
+    with pytest.raises(ConfigError, match=match):
+        SampleConfig(**kwargs)
+
+
+def test_unknown_keys_are_refused() -> None:
+    with pytest.raises(ConfigError, match="unknown SampleConfig parameter"):
+        config_from_mapping(SampleConfig, {"chunksize": 3})
+
+
+def test_yaml_round_trip(tmp_path) -> None:
+    cfg = SampleConfig(chunk_size=500, mode="exact", weights=(0.5,), names=("/a", "/b"))
+    text = config_yaml(cfg, node_name="sample_node")
+    data = yaml.safe_load(text)
+    assert data["/**"]["ros__parameters"]["chunk_size"] == 500
+    assert "# Vertices per chunk. Range [1, 1e+06]." in text
+    assert "(read-only at run time)" in text
+    path = tmp_path / "sample_node.yaml"
+    write_text_atomic(path, text)
+    assert load_config_yaml(SampleConfig, path) == cfg
+    assert config_yaml(SampleConfig, node_name="x") == config_yaml(SampleConfig(), node_name="x")
+
+
+def test_load_reports_bad_files(tmp_path) -> None:
+    path = tmp_path / "bad.yaml"
+    path.write_text("/**:\n  ros__parameters:\n    chunk_size: -3\n")
+    with pytest.raises(ConfigError, match=r"bad.yaml: .*chunk_size=-3 is below"):
+        load_config_yaml(SampleConfig, path)
+    path.write_text("a: [\n")
+    with pytest.raises(ConfigError, match="not valid YAML"):
+        load_config_yaml(SampleConfig, path)
+    with pytest.raises(ConfigError, match="no parameter file"):
+        load_config_yaml(SampleConfig, tmp_path / "missing.yaml")
+
+
+def test_fields_need_param() -> None:
+    @dataclass(frozen=True)
+    class Bad(Config):
+        x: int = 3
+
+    with pytest.raises(ConfigError, match="declare configuration fields with lightfast.config.param"):
+        Bad()
+    assert [s.name for s in field_specs(SampleConfig)][:2] == ["chunk_size", "period_s"]
