@@ -74,7 +74,7 @@ class BagInfo:
         ]
         width = max((len(t.name) for t in self.topics), default=0)
         for t in self.topics:
-            rate = f"{t.message_count / duration_s:8.2f} Hz" if duration_s > 0 else "       - Hz"
+            rate = f"{(t.message_count - 1) / duration_s:8.2f} Hz" if duration_s > 0 and t.message_count > 1 else "       - Hz"
             qos = ", ".join(sorted({f"{q.reliability.name.lower()}/{q.durability.name.lower()}" for q in t.offered_qos}))
             lines.append(
                 f"  {t.name:<{width}}  {t.msgtype:<32} {t.message_count:7d} msgs {rate}"

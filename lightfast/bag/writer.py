@@ -119,11 +119,16 @@ class BagWriter:
         self.counts[topic] += 1
 
     def write_message(self, topic: str, log_time_ns: int, message: Any) -> None:
-        """Serialize a rosbags message object (see :func:`default_typestore`) and append it."""
+        """Serialize a rosbags message object (see :func:`default_typestore`) as Fast CDR would, and append it."""
         conn = self._connections.get(topic)
         if conn is None:
             raise BagError(f"topic {topic} was not added to the bag")
-        self.write(topic, log_time_ns, self.typestore.serialize_cdr(message, conn.msgtype))
+        data = self.typestore.serialize_cdr(message, conn.msgtype)
+        if pad := -len(data) % 4:
+            # Fast CDR (what rclpy and every live publisher use) pads a payload to a multiple of 4 bytes; doing the
+            # same keeps a converted bag byte-identical to one recorded from live topics.
+            data = bytes(data) + bytes(pad)
+        self.write(topic, log_time_ns, data)
 
     def close(self) -> Path:
         """Finish the bag (summary, metadata.yaml) and move it to :attr:`path`. Returns the path."""

@@ -37,6 +37,7 @@ from scipy.spatial.transform import Rotation
 from lightfast.bag.writer import BagWriter, make_qos
 from lightfast.camera import PinholeCamera
 from lightfast.errors import LightfastError
+from lightfast.geometry import project_to_so3
 from lightfast.progress import track
 from lightfast.ros.convert import camera_info_from_camera, matrix_to_pose_stamped, numpy_to_image
 from lightfast.ros.msgtypes import rosbags_types
@@ -62,7 +63,8 @@ class DatasetError(LightfastError):
 
 @dataclass(frozen=True)
 class SevenScenesFrame:
-    """One RGB-D frame: ``rgb`` (H, W, 3) uint8, ``depth_mm`` (H, W) uint16 with 0 invalid, ``T_world_cam``."""
+    """One RGB-D frame: ``rgb`` (H, W, 3) uint8, ``depth_mm`` (H, W) uint16 with 0 invalid, ``T_world_cam``
+    (its rotation re-orthonormalized)."""
 
     index: int
     rgb: NDArray[np.uint8]
@@ -118,6 +120,8 @@ class SevenScenes:
         depth = depth.copy()
         depth[depth == INVALID_DEPTH_MM] = 0
         T = self._read_matrix(stem.with_name(stem.name + ".pose.txt"), (4, 4))
+        # KinectFusion stored the rotations in single precision (|RᵀR - I| ~ 1e-4): snap to the nearest rotation
+        T[:3, :3] = project_to_so3(T[:3, :3])
         return SevenScenesFrame(index, cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB), depth, T)
 
     def T_map_cam(self, frame: SevenScenesFrame) -> NDArray[np.float64]:

@@ -1,0 +1,52 @@
+"""ROS parameters generated from a config dataclass: declaration, overrides, validation of run-time changes."""
+from dataclasses import dataclass
+
+import pytest
+from rcl_interfaces.msg import ParameterType
+from rclpy.parameter import Parameter
+
+from lightfast.config import Config, ConfigError, param
+from lightfast.ros.params import ConfigParameters, declare_config
+
+
+@dataclass(frozen=True)
+class DemoConfig(Config):
+    chunk_size: int = param(100, description="Vertices per chunk.", min=1, max=1000)
+    gain: float = param(0.5, description="Gain.", min=0.0, max=1.0)
+    mode: str = param("a", description="Mode.", choices=("a", "b"))
+    weights: tuple[float, ...] = param((), description="Weights.")
+    map_path: str = param("", description="Map.", read_only=True)
+
+
+def test_declares_every_field_with_descriptor(make_node) -> None:
+    node = make_node("params_demo")
+    cfg = declare_config(node, DemoConfig)
+    assert cfg == DemoConfig()
+    desc = node.describe_parameter("chunk_size")
+    assert desc.type == ParameterType.PARAMETER_INTEGER
+    assert "Vertices per chunk" in desc.description
+    assert (desc.integer_range[0].from_value, desc.integer_range[0].to_value) == (1, 1000)
+    assert node.describe_parameter("weights").type == ParameterType.PARAMETER_DOUBLE_ARRAY
+    assert node.describe_parameter("map_path").read_only
+
+
+def test_overrides_are_validated(make_node) -> None:
+    node = make_node("params_ok", parameter_overrides=[Parameter("gain", value=0.25),
+                                                       Parameter("weights", value=[1.0, 2.0])])
+    cfg = declare_config(node, DemoConfig)
+    assert cfg.gain == 0.25 and cfg.weights == (1.0, 2.0)
+    bad = make_node("params_bad", parameter_overrides=[Parameter("mode", value="zzz")])
+    with pytest.raises(ConfigError, match="params_bad: invalid parameter: .*mode='zzz' is not one of"):
+        declare_config(bad, DemoConfig)
+
+
+def test_runtime_changes_are_checked_by_the_dataclass(make_node) -> None:
+    node = make_node("params_live")
+    seen: list[DemoConfig] = []
+    params = ConfigParameters(node, DemoConfig, on_change=seen.append)
+    result = node.set_parameters([Parameter("mode", value="c")])[0]
+    assert not result.successful and "not one of" in result.reason
+    assert params.config.mode == "a"
+    assert node.set_parameters([Parameter("mode", value="b")])[0].successful
+    assert params.config.mode == "b" and seen[-1].mode == "b"
+    assert not node.set_parameters([Parameter("map_path", value="/x")])[0].successful  # read-only
