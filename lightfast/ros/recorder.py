@@ -164,15 +164,15 @@ class BagRecorder:
         return self.report
 
 
-def drain(spin_once: Callable[[float], None], count: Callable[[], int], *, quiet_s: float = 0.1,
-          max_s: float = 5.0) -> None:
-    """Keep spinning until no new message arrived for ``quiet_s`` (at most ``max_s``): used on shutdown so
-    messages already in the subscription queues are written too."""
+def drain(spin_once: Callable[[float], None], count: Callable[[], int], *, quiet_s: float = 0.05,
+          max_s: float = 1.0) -> None:
+    """On shutdown, keep spinning until no message arrived for ``quiet_s`` (at most ``max_s``), so messages that
+    already sit in the subscription queues are written too. Bounded, because publishers may never pause."""
     deadline = time.monotonic() + max_s
     last = count()
     quiet_since = time.monotonic()
     while time.monotonic() < deadline:
-        spin_once(0.02)
+        spin_once(0.01)
         now = count()
         if now != last:
             last, quiet_since = now, time.monotonic()

@@ -66,7 +66,8 @@ def test_rate_start_offset_and_clock(tmp_path, make_node, executor) -> None:
                                  QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
     from std_msgs.msg import Header as RclHeader
 
-    sub_node.create_subscription(RclHeader, "/header", lambda m: None, QoSProfile(depth=100))
+    sub_node.create_subscription(RclHeader, "/header", lambda m: None,
+                                 QoSProfile(depth=100, reliability=ReliabilityPolicy.BEST_EFFORT))
     options = PlayOptions(rate=2.0, clock_hz=100.0, start_offset_s=0.2, wait_for_subscribers_s=5.0)
     t0 = time.monotonic()
     thread, out = play_in_thread(src, make_node("player"), options)
