@@ -52,17 +52,23 @@ def sevenscenes_bag(sevenscenes_dir: Path, tmp_path_factory: pytest.TempPathFact
 
 @pytest.fixture
 def domain_id() -> Iterator[int]:
-    """A ROS domain id held exclusively by this test (other test runs on the machine get other ids)."""
+    """A ROS domain id held exclusively by this test (other test runs on the machine get other ids).
+
+    ``LIGHTFAST_TEST_DOMAIN_ID`` forces an id: only for the isolation test's control experiment."""
     from lightfast.ros.domain import reserve_domain_id
 
+    if forced := os.environ.get("LIGHTFAST_TEST_DOMAIN_ID"):
+        yield int(forced)
+        return
     with reserve_domain_id() as lease:
         yield lease.domain_id
 
 
 @pytest.fixture
 def discovery_range() -> str:
-    """Discovery range of the test's own participant: OFF (in-process only); replay tests override it."""
-    return "OFF"
+    """Discovery range of the test's own participant: OFF (in-process only); replay tests override it
+    (``LIGHTFAST_TEST_DISCOVERY`` too, for the isolation probe)."""
+    return os.environ.get("LIGHTFAST_TEST_DISCOVERY", "OFF")
 
 
 @pytest.fixture
