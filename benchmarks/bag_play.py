@@ -54,7 +54,7 @@ def run_once(bag: Path, rate: float, domain_id: int, topics: dict[str, str], tot
     counts = {t: 0 for t in topics}
     stats = {"bytes": 0, "first": 0.0, "last": 0.0}
 
-    def make_cb(topic: str):  # noqa: ANN202
+    def make_cb(topic: str):
         def cb(data: bytes) -> None:
             now = time.monotonic()
             if not stats["first"]:

@@ -68,8 +68,8 @@ class PinholeCamera:
         if factor <= 0:
             raise CameraModelError(f"scale factor must be > 0, got {factor}")
         return PinholeCamera(
-            width=max(1, int(round(self.width * factor))),
-            height=max(1, int(round(self.height * factor))),
+            width=max(1, round(self.width * factor)),
+            height=max(1, round(self.height * factor)),
             fx=self.fx * factor,
             fy=self.fy * factor,
             cx=(self.cx + 0.5) * factor - 0.5,

@@ -146,7 +146,9 @@ def _optional_float(default: float) -> dict[str, object]:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="lightfast", description="lightfast: bag tools, datasets and node configuration.")
+    parser = argparse.ArgumentParser(
+        prog="lightfast", description="lightfast: bag tools, datasets and node configuration."
+    )
     parser.add_argument("-v", "--verbose", action="store_true", help="log progress details")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
@@ -229,7 +231,7 @@ def run(func: Callable[[argparse.Namespace], int], args: argparse.Namespace) -> 
     except KeyboardInterrupt:
         print("lightfast: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
-    except Exception as exc:  # noqa: BLE001 - the CLI's last line of defence
+    except Exception as exc:
         if debug:
             raise
         print(f"lightfast: internal error: {type(exc).__name__}: {exc} (set LIGHTFAST_DEBUG=1 for the traceback)",

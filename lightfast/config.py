@@ -41,8 +41,8 @@ def param(
     default: Any,
     *,
     description: str,
-    min: float | None = None,  # noqa: A002 - reads naturally at the call site
-    max: float | None = None,  # noqa: A002
+    min: float | None = None,
+    max: float | None = None,
     choices: tuple[Any, ...] | None = None,
     read_only: bool = False,
 ) -> Any:
@@ -185,7 +185,9 @@ def config_from_mapping(cls: type[C], values: Mapping[str, Any], *, allow_unknow
     known = {s.name for s in field_specs(cls)}
     unknown = sorted(set(values) - known)
     if unknown and not allow_unknown:
-        raise ConfigError(f"unknown {cls.__name__} parameter(s): {', '.join(unknown)} (known: {', '.join(sorted(known))})")
+        raise ConfigError(
+            f"unknown {cls.__name__} parameter(s): {', '.join(unknown)} (known: {', '.join(sorted(known))})"
+        )
     return cls(**{k: v for k, v in values.items() if k in known})
 
 

@@ -74,8 +74,12 @@ class BagInfo:
         ]
         width = max((len(t.name) for t in self.topics), default=0)
         for t in self.topics:
-            rate = f"{(t.message_count - 1) / duration_s:8.2f} Hz" if duration_s > 0 and t.message_count > 1 else "       - Hz"
-            qos = ", ".join(sorted({f"{q.reliability.name.lower()}/{q.durability.name.lower()}" for q in t.offered_qos}))
+            rate = "       - Hz"
+            if duration_s > 0 and t.message_count > 1:
+                rate = f"{(t.message_count - 1) / duration_s:8.2f} Hz"
+            qos = ", ".join(
+                sorted({f"{q.reliability.name.lower()}/{q.durability.name.lower()}" for q in t.offered_qos})
+            )
             lines.append(
                 f"  {t.name:<{width}}  {t.msgtype:<32} {t.message_count:7d} msgs {rate}"
                 f"  {t.serialization_format}" + (f"  qos {qos}" if qos else "")
@@ -228,7 +232,9 @@ class BagReader:
     def __enter__(self) -> BagReader:
         return self
 
-    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None) -> None:
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
         self.close()
 
 

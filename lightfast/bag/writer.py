@@ -151,14 +151,16 @@ class BagWriter:
         self._closed = True
         try:
             self._writer.close()
-        except Exception:  # noqa: BLE001 - the bag is being thrown away
+        except Exception:
             pass
         shutil.rmtree(self._tmp, ignore_errors=True)
 
     def __enter__(self) -> BagWriter:
         return self
 
-    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None) -> None:
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
         if exc_type is None:
             self.close()
         else:

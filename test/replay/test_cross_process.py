@@ -81,18 +81,12 @@ def test_sigint_mid_stream_leaves_a_complete_bag(tmp_path: Path, domain_id: int,
         sent = {"n": 0}
         stop = threading.Event()
 
-        def talk() -> None:
-            while not stop.is_set():
-                pub.publish(String(data=str(sent["n"])))
-                sent["n"] += 1
-                time.sleep(0.001)
-
         with bounded_process([*LIGHTFAST, "bag", "record", "-o", str(out), "/stream"], timeout_s=120,
                              env=child_env(domain_id)) as rec:
             assert spin_until(executor, lambda: pub.get_subscription_count() == 1, timeout_s=60)
-            talker = threading.Thread(target=talk, daemon=True)
+            talker = threading.Thread(target=_talk, args=(pub, sent, stop), daemon=True)
             talker.start()
-            assert spin_until(executor, lambda: sent["n"] >= 500, timeout_s=60)
+            assert spin_until(executor, lambda: sent["n"] >= 500, timeout_s=60)  # noqa: B023 - used within this iteration
             rec.send_signal(sig)
             rec_out, rec_err = rec.communicate(timeout=60)
             stop.set()
@@ -104,6 +98,14 @@ def test_sigint_mid_stream_leaves_a_complete_bag(tmp_path: Path, domain_id: int,
         assert len(values) == reported > 0
         assert values == list(range(values[0], values[0] + len(values)))  # nothing lost in between
         assert reported < sent["n"]  # the signal really came mid-stream
+
+
+def _talk(pub, sent: dict[str, int], stop: threading.Event) -> None:
+    """Publish consecutive numbers at about 1 kHz until ``stop``."""
+    while not stop.is_set():
+        pub.publish(String(data=str(sent["n"])))
+        sent["n"] += 1
+        time.sleep(0.001)
 
 
 def _strings(reader: Reader) -> list[str]:

@@ -775,6 +775,15 @@ def test_conversions_do_not_import_rclpy() -> None:
     assert result.returncode == 0, result.stderr
 
 
+def test_rclpy_flavour_copies_pixels_once() -> None:
+    data = RCLPY.uint8_array(np.arange(12, dtype=np.uint8))
+    assert isinstance(data, array.array) and data.tolist() == list(range(12))
+    msg = RCLPY.new("sensor_msgs/msg/Image", height=3, width=4, encoding="mono8", step=4, data=data)
+    assert msg.data is data, "the setter must keep the array.array, not copy it again"
+    covariance = RCLPY.float64_array(np.eye(6))
+    assert RCLPY.new("geometry_msgs/msg/PoseWithCovariance", covariance=covariance).covariance is covariance
+
+
 def test_rclpy_messages_keep_default_field_checking() -> None:
     msg = numpy_to_image(np.zeros((2, 2), np.uint8), "mono8", types=RCLPY)
     assert msg._check_fields == sensor_msgs.msg.Image()._check_fields

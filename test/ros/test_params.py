@@ -36,7 +36,7 @@ def test_overrides_are_validated(make_node) -> None:
     cfg = declare_config(node, DemoConfig)
     assert cfg.gain == 0.25 and cfg.weights == (1.0, 2.0)
     bad = make_node("params_bad", parameter_overrides=[Parameter("mode", value="zzz")])
-    with pytest.raises(ConfigError, match="params_bad: invalid parameter: .*mode='zzz' is not one of"):
+    with pytest.raises(ConfigError, match=r"params_bad: invalid parameter: .*mode='zzz' is not one of"):
         declare_config(bad, DemoConfig)
 
 

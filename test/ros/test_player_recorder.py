@@ -107,7 +107,7 @@ def test_loop_until_stopped(tmp_path, make_node, executor) -> None:
 def test_recorder_records_all_topics_and_drains(tmp_path, make_node, executor) -> None:
     src = make_bag(tmp_path / "src", n=30)
     recorder = BagRecorder(make_node("recorder"), BagWriter(tmp_path / "rec", storage="sqlite3"))
-    thread, out = play_in_thread(src, make_node("player"), PlayOptions(rate=0.0, wait_for_subscribers_s=5.0))
+    thread, _ = play_in_thread(src, make_node("player"), PlayOptions(rate=0.0, wait_for_subscribers_s=5.0))
     assert spin_until(executor, lambda: len(recorder.subscribed) == 2, timeout_s=10.0)
     thread.join(timeout=20)
     drain(lambda t: executor.spin_once(timeout_sec=t), lambda: recorder.report.message_count)

@@ -115,7 +115,7 @@ def test_errors_are_one_clear_line(tmp_path: Path) -> None:
     with pytest.raises(BagNotFoundError, match="no bag at"):
         open_bag(tmp_path / "missing")
     (tmp_path / "empty_dir").mkdir()
-    with pytest.raises(BagFormatError, match="without metadata.yaml"):
+    with pytest.raises(BagFormatError, match=r"without metadata\.yaml"):
         open_bag(tmp_path / "empty_dir")
     path = write_sample(tmp_path / "bag")
     data = (path / "bag.mcap").read_bytes()

@@ -80,6 +80,6 @@ def test_fields_need_param() -> None:
     class Bad(Config):
         x: int = 3
 
-    with pytest.raises(ConfigError, match="declare configuration fields with lightfast.config.param"):
+    with pytest.raises(ConfigError, match=r"declare configuration fields with lightfast\.config\.param"):
         Bad()
     assert [s.name for s in field_specs(SampleConfig)][:2] == ["chunk_size", "period_s"]
