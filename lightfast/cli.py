@@ -72,7 +72,7 @@ def _cmd_bag_play(args: argparse.Namespace) -> int:
         with ros_session("lightfast_bag_play", domain_id=args.domain_id, install_signal_handlers=False) as (node, _):
             report = play_bag(bag, node, options, stop=stop)
     print(report.summary())
-    return 0
+    return EXIT_INTERRUPTED if report.interrupted else 0
 
 
 def _cmd_bag_record(args: argparse.Namespace) -> int:

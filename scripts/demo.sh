@@ -31,11 +31,11 @@ cleanup() {
 trap cleanup EXIT
 trap 'echo "interrupted"; exit 130' INT TERM
 
-recorded="$out/demo-$(date +%Y%m%d-%H%M%S)"
+recorded="$out/demo-recording"
 topics=(/camera/color/image_raw /camera/color/camera_info /camera/depth/image_raw /camera/depth/camera_info
         /ground_truth/pose)
 echo "== recording ${#topics[@]} topics to $recorded (domain $ROS_DOMAIN_ID)"
-"$lf" bag record -o "$recorded" "${topics[@]}" &
+"$lf" bag record --overwrite -o "$recorded" "${topics[@]}" &
 pids+=($!)
 recorder=$!
 
