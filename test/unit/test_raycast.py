@@ -151,6 +151,9 @@ def test_non_unit_directions_are_normalized() -> None:
     np.testing.assert_allclose(h.distance_m, np.linalg.norm([0.3, 0.4, 1.2]), rtol=1e-6)
     np.testing.assert_allclose(h.points(), [0.4, 0.5, 0.0], atol=1e-6)
     assert h.shape == ()
+    # extreme (but finite, non-zero) lengths
+    h = caster.intersect([[0.3, 0.6, 4.0]] * 2, [[0.0, 0.0, -1e-200], [0.0, 1e-300, -1e300]])
+    np.testing.assert_allclose(h.distance_m, [4.0, 4.0], rtol=1e-6)
 
 
 def test_occlusion_with_t_far_below_and_above_the_hit() -> None:
@@ -190,6 +193,12 @@ def test_t_near_skips_the_first_surface() -> None:
     hits = caster.intersect(o, d, t_near_m=np.array([0.0, 2.5, 2.5]), t_far_m=np.array([10.0, 10.0, 2.0]))
     np.testing.assert_allclose(hits.distance_m, [2.0, 3.0, np.inf], rtol=1e-6)
     np.testing.assert_array_equal(caster.occluded(o, d, t_near_m=[0.0, 2.5], t_far_m=[0.0, 2.5]), [False, False])
+    # ... even when the (empty) interval sits exactly on a surface, which Embree alone would report at t = 0
+    on_surface = np.array([0.0, 0.5, 0.3])
+    assert not caster.intersect(on_surface, d, t_far_m=0.0).hit
+    assert not caster.occluded(on_surface, d, t_far_m=0.0)
+    assert not caster.intersect(o, d, t_near_m=2.0, t_far_m=2.0).hit
+    assert not caster.occluded(o, d, t_near_m=2.0, t_far_m=1.0)
 
 
 def test_misses() -> None:
