@@ -1,0 +1,194 @@
+"""Background update of the normalized sun radiosity B̂_sun in bounded chunks (paper §III-E).
+
+B̂_sun changes with the sun position. The paper computes it in a parallel thread, one chunk per frame, so that the
+update never stalls tracking, and — knowing how many frames the update takes — aims it at the sun position of the
+moment it will finish. Eq. 1–2 are linear in the light, which is what lets the work be split:
+
+1. *direct* steps, one per block of ``chunk_vertices`` vertices: Eq. 1 for those vertices (|block|·|L_sun| rays)
+   and their contribution to each patch's direct irradiance (a sum over blocks);
+2. *transport* steps, one Jacobi iteration of Eq. 2 on the patches each;
+3. *output* steps, one per block of vertices: B̂_sun = ρ·(E_direct + interpolated indirect irradiance). Each
+   output step yields a finished :class:`SunChunk`; together they cover every vertex exactly once.
+
+Every step costs at most max(|block|·|L_sun| rays, one |P|² product). The chunked result equals the one-shot
+:func:`sun_radiosity` up to float rounding.
+"""
+from __future__ import annotations
+
+import logging
+from collections.abc import Iterator
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from lightfast.config import Config, param
+from lightfast.daylight.lighting_map import LightingMap
+from lightfast.daylight.sun import Site, SunPosition, sun_position
+from lightfast.daylight.radiosity import PatchRadiositySolver, direct_irradiance, indirect_patch_irradiance
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class SunChunk:
+    """B̂_sun (normalized sun radiosity, linear RGB) of vertices ``first_vertex .. first_vertex + len - 1``."""
+
+    epoch_ns: int  # the sun time this update is for (ns since the UNIX epoch, UTC)
+    first_vertex: int
+    radiosity: NDArray[np.float32]  # (n, 3)
+
+    @property
+    def vertex_ids(self) -> NDArray[np.uint32]:
+        return np.arange(self.first_vertex, self.first_vertex + len(self.radiosity), dtype=np.uint32)
+
+
+class SunUpdate:
+    """One B̂_sun computation for ``direction_to_sun`` (map frame), split into bounded :meth:`step` calls."""
+
+    def __init__(
+        self,
+        lmap: LightingMap,
+        direction_to_sun: ArrayLike,
+        *,
+        epoch_ns: int = 0,
+        chunk_vertices: int = 50_000,
+    ) -> None:
+        if chunk_vertices < 1:
+            raise ValueError(f"chunk_vertices must be >= 1, got {chunk_vertices}")
+        self.lmap = lmap
+        self.direction = np.asarray(direction_to_sun, dtype=np.float64)
+        self.epoch_ns = int(epoch_ns)
+        self.lights = lmap.sun_lights(self.direction)
+        V = lmap.num_vertices
+        self._blocks = [slice(s, min(V, s + chunk_vertices)) for s in range(0, V, chunk_vertices)]
+        self._direct = np.zeros(V)
+        self._patch_direct = np.zeros(lmap.patches.count)
+        self._solver: PatchRadiositySolver | None = None
+        self._indirect_patch: NDArray[np.float64] | None = None
+        self._phase = "direct"
+        self._index = 0
+        self.steps_done = 0
+
+    @property
+    def sun_visible(self) -> bool:
+        return len(self.lights.directions) > 0
+
+    @property
+    def done(self) -> bool:
+        return self._phase == "done"
+
+    def estimated_steps(self) -> int:
+        """Steps this update takes (transport steps estimated as the configured or a typical iteration count)."""
+        transport = self.lmap.config.iterations or 30
+        return 2 * len(self._blocks) + (transport if self.sun_visible else 1)
+
+    def step(self) -> SunChunk | None:
+        """Do one bounded unit of work; returns a finished chunk during the output phase, else ``None``."""
+        lmap = self.lmap
+        self.steps_done += 1
+        if self._phase == "direct":
+            sl = self._blocks[self._index]
+            if self.sun_visible:
+                e = direct_irradiance(lmap.mesh, lmap.caster, self.lights, vertices=sl,
+                                      offset_m=lmap.config.ray_offset_m)
+                self._direct[sl] = e
+                self._patch_direct += lmap.patches.vertex_to_patch[:, sl] @ e
+            self._index += 1
+            if self._index == len(self._blocks):
+                self._phase = "transport"
+                self._solver = PatchRadiositySolver(lmap.transport, lmap.patches.reflectance, self._patch_direct,
+                                                    iterations=lmap.config.iterations or None)
+            return None
+        if self._phase == "transport":
+            assert self._solver is not None
+            if not self._solver.done:
+                self._solver.step()
+            if self._solver.done:
+                self._indirect_patch = indirect_patch_irradiance(lmap.transport, self._solver.radiosity)
+                self._phase, self._index = "output", 0
+            return None
+        if self._phase == "output":
+            sl = self._blocks[self._index]
+            assert self._indirect_patch is not None
+            indirect = lmap.patches.patch_to_vertex[sl] @ self._indirect_patch
+            b = lmap.mesh.reflectance[sl] * (self._direct[sl, None] + indirect)
+            self._index += 1
+            if self._index == len(self._blocks):
+                self._phase = "done"
+            return SunChunk(self.epoch_ns, sl.start, b.astype(np.float32))
+        raise RuntimeError("SunUpdate.step() called after the update finished")
+
+    def run(self) -> Iterator[SunChunk]:
+        """All remaining steps; yields the output chunks."""
+        while not self.done:
+            chunk = self.step()
+            if chunk is not None:
+                yield chunk
+
+
+def sun_radiosity(lmap: LightingMap, direction_to_sun: ArrayLike) -> NDArray[np.float32]:
+    """B̂_sun (V, 3) in one go."""
+    chunks = list(SunUpdate(lmap, direction_to_sun, chunk_vertices=max(1, lmap.num_vertices)).run())
+    return np.concatenate([c.radiosity for c in chunks])
+
+
+@dataclass(frozen=True)
+class SunUpdateConfig(Config):
+    """Parameters of ``sun_update_node``."""
+
+    lighting_map: str = param("", description="Lighting map directory made by `lightfast daylight prepare`.",
+                              read_only=True)
+    site_file: str = param("", description="Site YAML overriding the lighting map's site; empty uses the map's.",
+                           read_only=True)
+    chunk_vertices: int = param(50_000, description="Vertices per update step: bounds the rays traced per step "
+                                "(chunk_vertices x sun samples).", min=1, max=100_000_000)
+    update_period_s: float = param(60.0, description="Start a new B̂_sun update this often, in seconds of ROS time "
+                                   "(the sun moves 0.25° per minute).", min=0.0, max=86_400.0)
+    step_period_s: float = param(0.02, description="Period of the update steps in seconds: one bounded step per "
+                                 "period (the paper does one chunk per frame).", min=0.001, max=60.0)
+    direction_rate_hz: float = param(2.0, description="Rate of /sun/direction in Hz.", min=1.0, max=1000.0)
+    frame_id: str = param("map", description="Frame of the published direction and radiosity chunks.")
+
+
+class SunUpdatePipeline:
+    """What ``sun_update_node`` runs, without ROS: the sun direction at any time, and the chunked B̂_sun updates.
+
+    Call :meth:`step` once per step period with the current time. A new update starts when none is running and
+    ``update_period_s`` has passed since the last one started; it is aimed at the sun position of the moment it
+    will finish (now + estimated steps × step period, as in §III-E).
+    """
+
+    def __init__(self, lmap: LightingMap, config: SunUpdateConfig, *, site: Site | None = None) -> None:
+        self.lmap = lmap
+        self.config = config
+        self.site = site or lmap.site
+        self.current: SunUpdate | None = None
+        self.last_start_ns: int | None = None
+        self.epochs_started = 0
+
+    def sun(self, now_ns: int) -> SunPosition:
+        return sun_position(self.site, int(now_ns))
+
+    def _due(self, now_ns: int) -> bool:
+        if self.current is not None and not self.current.done:
+            return False
+        if self.last_start_ns is None:
+            return True
+        return now_ns - self.last_start_ns >= self.config.update_period_s * 1e9 or now_ns < self.last_start_ns
+
+    def step(self, now_ns: int) -> SunChunk | None:
+        """Advance the running update by one step (starting one if due); returns a finished chunk or ``None``."""
+        if self._due(now_ns):
+            probe = SunUpdate(self.lmap, (0.0, 0.0, 1.0), chunk_vertices=self.config.chunk_vertices)
+            finish_ns = int(now_ns + probe.estimated_steps() * self.config.step_period_s * 1e9)
+            direction = self.sun(finish_ns).direction_map
+            self.current = SunUpdate(self.lmap, direction, epoch_ns=finish_ns,
+                                     chunk_vertices=self.config.chunk_vertices)
+            self.last_start_ns = now_ns
+            self.epochs_started += 1
+            log.info("sun update %d for %.3f s ahead, direction %s", self.epochs_started,
+                     (finish_ns - now_ns) * 1e-9, np.round(direction, 4))
+        if self.current is None or self.current.done:
+            return None
+        return self.current.step()

@@ -1,0 +1,1 @@
+"""Simulators and reference renderers (independent oracles the daylight radiosity is validated against)."""
