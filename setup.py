@@ -8,7 +8,7 @@ from glob import glob
 from setuptools import find_packages, setup
 
 PACKAGE = "lightfast"
-NODES: list[str] = []  # node packages, one per capability, added when each is built
+NODES: list[str] = ["sun_update_node"]  # node packages, one per capability, added when each is built
 
 setup(
     name=PACKAGE,

@@ -131,6 +131,46 @@ def _cmd_config_write(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_daylight_prepare(args: argparse.Namespace) -> int:
+    from lightfast.config import config_from_mapping
+    from lightfast.daylight.lighting_map import LightingMapConfig, prepare_lighting_map
+    from lightfast.daylight.mesh import load_ply
+    from lightfast.daylight.sun import Site
+
+    overrides = {k: v for k, v in (("patch_size_m", args.patch_size), ("sky_directions", args.sky_directions),
+                                   ("sun_samples", args.sun_samples), ("iterations", args.iterations))
+                 if v is not None}
+    config = config_from_mapping(LightingMapConfig, overrides)
+    mesh = load_ply(args.mesh)
+    site = Site.from_yaml(args.site)
+    start = time.monotonic()
+    lmap = prepare_lighting_map(mesh, site, config, progress=sys.stderr.isatty())
+    path = lmap.save(args.out, overwrite=args.overwrite)
+    size_mb = sum(p.stat().st_size for p in Path(path).iterdir()) / 1e6
+    print(f"wrote {path}: {mesh.num_vertices} vertices, {lmap.patches.count} patches, {size_mb:.1f} MB, "
+          f"{time.monotonic() - start:.1f} s")
+    return 0
+
+
+def _cmd_daylight_sun(args: argparse.Namespace) -> int:
+    import datetime as dt
+
+    from lightfast.daylight.sun import Site, sun_position
+
+    site = Site.from_yaml(args.site)
+    try:
+        when = dt.datetime.fromisoformat(args.time) if args.time else dt.datetime.now(dt.UTC)
+    except ValueError as exc:
+        raise LightfastError(f"bad --time {args.time!r}: {exc} (use ISO 8601 with an offset)") from None
+    if when.tzinfo is None:
+        when = when.replace(tzinfo=site.zone)
+    sun = sun_position(site, when)
+    d = sun.direction_map
+    print(f"{when.isoformat()}: azimuth {float(sun.azimuth_deg):.4f}°, elevation {float(sun.elevation_deg):.4f}°, "
+          f"direction in map ({d[0]:.5f}, {d[1]:.5f}, {d[2]:.5f})" + ("" if sun.above_horizon else ", below horizon"))
+    return 0
+
+
 def _cmd_dds_env(_args: argparse.Namespace) -> int:
     from lightfast.ros.transport import local_transport_env
 
@@ -210,6 +250,23 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--dir", default=str(Path(__file__).resolve().parent.parent / "config"), help="output folder")
     p.add_argument("--check", action="store_true", help="only check that the files are up to date")
     p.set_defaults(func=_cmd_config_write)
+
+    daylight = sub.add_parser("daylight", help="daylight illumination: sun position, lighting maps")
+    daylight_sub = daylight.add_subparsers(dest="daylight_command", required=True, metavar="DAYLIGHT_COMMAND")
+    p = daylight_sub.add_parser("prepare", help="build a lighting map (patches, transport, sky and ground radiosity)")
+    p.add_argument("mesh", help="PLY mesh with per-vertex reflectance (red green blue in [0,1])")
+    p.add_argument("site", help="site YAML (latitude_deg, longitude_deg, altitude_m, heading_deg, timezone)")
+    p.add_argument("out", help="lighting map directory to create")
+    p.add_argument("--patch-size", type=float, help="patch edge length in metres (default 0.1)")
+    p.add_argument("--sky-directions", type=int, help="directional lights over the sphere (default 2048)")
+    p.add_argument("--sun-samples", type=int, help="directions inside the solar disk (default 8)")
+    p.add_argument("--iterations", type=int, help="Jacobi iterations of Eq. 2 (default: until converged)")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing map")
+    p.set_defaults(func=_cmd_daylight_prepare)
+    p = daylight_sub.add_parser("sun", help="sun position at a site and time")
+    p.add_argument("site", help="site YAML")
+    p.add_argument("--time", help="ISO 8601 time (default now); without an offset the site's time zone is used")
+    p.set_defaults(func=_cmd_daylight_sun)
 
     dds = sub.add_parser("dds", help="DDS transport settings")
     dds_sub = dds.add_subparsers(dest="dds_command", required=True, metavar="DDS_COMMAND")

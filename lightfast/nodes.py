@@ -11,7 +11,9 @@ from pathlib import Path
 from lightfast.config import Config, config_yaml
 from lightfast.io import write_text_atomic
 
-NODE_CONFIGS: dict[str, str] = {}
+NODE_CONFIGS: dict[str, str] = {
+    "sun_update_node": "lightfast.daylight.sun_update:SunUpdateConfig",
+}
 
 
 def node_config_class(node_name: str) -> type[Config]:

@@ -57,15 +57,16 @@ if [ ! -f "$venv/.complete" ]; then
   touch "$venv/.complete"
 fi
 
-# Install this checkout (editable) unless the venv already points here.
-if [ "$(cat "$venv/.checkout" 2>/dev/null)" != "$root" ] \
+# Install this checkout (editable) unless the venv already points here with the same entry points.
+stamp="$root $(cat "$root/setup.py" "$root/setup.cfg" | sha256sum | cut -c1-16)"
+if [ "$(cat "$venv/.checkout" 2>/dev/null)" != "$stamp" ] \
    || ! (cd / && "$venv/bin/python" -c \
          'import lightfast, sys; sys.exit(0 if lightfast.__file__.startswith(sys.argv[1]) else 1)' "$root/") 2>/dev/null
 then
   say "installing this checkout ($root) into the venv"
   "$venv/bin/python" -m pip install -q --disable-pip-version-check --no-deps --no-build-isolation --use-pep517 -e "$root" \
     >"$venv_root/pip-editable.log" 2>&1 || { tail -n 20 "$venv_root/pip-editable.log" >&2; die "installing $root failed"; }
-  printf '%s\n' "$root" > "$venv/.checkout"
+  printf '%s\n' "$stamp" > "$venv/.checkout"
 fi
 
 ln -sfn "$venv" "$root/.venv"

@@ -50,6 +50,18 @@ def sevenscenes_bag(sevenscenes_dir: Path, tmp_path_factory: pytest.TempPathFact
     return convert_7scenes(sevenscenes_dir, tmp_path_factory.mktemp("bags") / "7scenes_redkitchen_300")
 
 
+@pytest.fixture(scope="session")
+def tiny_lighting_map(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A small lighting map (coarse window room at Freiburg), saved once per session."""
+    from lightfast.daylight.lighting_map import LightingMapConfig, prepare_lighting_map
+    from lightfast.daylight.sun import FREIBURG
+    from lightfast.sim.validation_rooms import box_room_with_window
+
+    mesh = box_room_with_window(tessellation_m=0.4)
+    config = LightingMapConfig(patch_size_m=0.6, sky_directions=256, hemisphere_rays=32)
+    return prepare_lighting_map(mesh, FREIBURG, config).save(tmp_path_factory.mktemp("map") / "lm")
+
+
 @pytest.fixture
 def domain_id() -> Iterator[int]:
     """A ROS domain id held exclusively by this test (other test runs on the machine get other ids).

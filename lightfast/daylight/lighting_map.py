@@ -124,7 +124,7 @@ class LightingMap:
             "format": FORMAT_NAME,
             "version": FORMAT_VERSION,
             "mesh_sha256": self.mesh.content_hash,
-            "created_utc": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"),
+            "created_utc": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
             "counts": {"vertices": self.mesh.num_vertices, "faces": self.mesh.num_faces, "patches": p.count},
             "config": self.config.to_dict(),
             "site": self.site.to_dict(),

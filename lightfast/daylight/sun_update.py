@@ -24,8 +24,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from lightfast.config import Config, param
 from lightfast.daylight.lighting_map import LightingMap
-from lightfast.daylight.sun import Site, SunPosition, sun_position
 from lightfast.daylight.radiosity import PatchRadiositySolver, direct_irradiance, indirect_patch_irradiance
+from lightfast.daylight.sun import Site, SunPosition, sun_position
 
 log = logging.getLogger(__name__)
 

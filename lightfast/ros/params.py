@@ -78,7 +78,7 @@ def declare_config(node: Node, cls: type[C]) -> C:
 class ConfigParameters(Generic[C]):
     """A node's configuration kept in sync with its parameters; invalid changes are refused.
 
-    ``on_change(new_config)`` runs after an accepted change.
+    ``on_change(new_config)`` (settable later too) runs after an accepted change.
     """
 
     def __init__(self, node: Node, cls: type[C], *, on_change: Callable[[C], None] | None = None) -> None:
@@ -86,7 +86,7 @@ class ConfigParameters(Generic[C]):
         self.cls = cls
         self.config: C = declare_config(node, cls)
         self._specs = {s.name: s for s in field_specs(cls)}
-        self._on_change = on_change
+        self.on_change = on_change
         node.add_on_set_parameters_callback(self._validate)
         node.add_post_set_parameters_callback(self._apply)
 
@@ -103,5 +103,5 @@ class ConfigParameters(Generic[C]):
 
     def _apply(self, params: list[Parameter]) -> None:
         self.config = self._candidate(params)
-        if self._on_change is not None:
-            self._on_change(self.config)
+        if self.on_change is not None:
+            self.on_change(self.config)

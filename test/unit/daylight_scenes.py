@@ -20,7 +20,7 @@ def quad_grid(origin, u, v, nu: int, nv: int, rho) -> ReflectanceMesh:
 def closed_box(size=(2.0, 2.0, 2.0), n: int = 8, rho=0.5) -> ReflectanceMesh:
     """A closed box with inward-facing walls, ``n`` × ``n`` quads per wall."""
     sx, sy, sz = size
-    X, Y, Z, O = np.array([sx, 0, 0.0]), np.array([0, sy, 0.0]), np.array([0, 0, sz]), np.zeros(3)
+    X, Y, Z, O = np.array([sx, 0, 0.0]), np.array([0, sy, 0.0]), np.array([0, 0, sz]), np.zeros(3)  # noqa: E741
     walls = [(O, X, Y), (O + Z, Y, X), (O, Z, X), (O + Y, X, Z), (O, Y, Z), (O + X, Z, Y)]
     return merge_meshes([quad_grid(o, u, v, n, n, rho) for o, u, v in walls])
 

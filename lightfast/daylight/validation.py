@@ -1,0 +1,49 @@
+"""Compare the normalized radiosity of a lighting map with an independent renderer (Radiance) at surface points.
+
+Used by the CI test and ``benchmarks/radiance_validation.py`` (issue: validation against Radiance). Irradiance
+is compared, ``E = B̂/ρ`` per vertex interpolated barycentrically at each point, after one best-fit global scale
+per light component (the method's brightness scales absorb any global factor).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from lightfast.daylight.lighting_map import LightingMap
+
+
+@dataclass(frozen=True)
+class Agreement:
+    """Ours vs reference at N points (RGB irradiance), after scaling ours by ``scale``."""
+
+    ours: NDArray[np.float64]  # (N, 3)
+    reference: NDArray[np.float64]  # (N, 3)
+    scale: float
+    median_relative_error: float
+    pearson_r: float
+
+    @classmethod
+    def of(cls, ours: ArrayLike, reference: ArrayLike) -> Agreement:
+        o = np.asarray(ours, dtype=np.float64)
+        r = np.asarray(reference, dtype=np.float64)
+        scale = float(np.sum(o * r) / np.sum(o * o)) if np.any(o) else 1.0
+        rel = np.abs(scale * o - r) / np.maximum(np.abs(r), 1e-12)
+        pearson = float(np.corrcoef(o.reshape(-1), r.reshape(-1))[0, 1])
+        return cls(o, r, scale, float(np.median(rel)), pearson)
+
+
+def irradiance_at_points(lmap: LightingMap, radiosity: NDArray[np.float32], points_m: ArrayLike,
+                         normals: ArrayLike) -> NDArray[np.float64]:
+    """Irradiance ``B̂/ρ`` interpolated at surface points (each found by a short ray back onto the surface)."""
+    p = np.asarray(points_m, dtype=np.float64)
+    n = np.asarray(normals, dtype=np.float64)
+    hits = lmap.caster.intersect(p + 1e-3 * n, -n, t_far_m=0.01)
+    if not np.all(hits.hit):
+        raise ValueError(f"{int(np.sum(~hits.hit))} points are not on the mesh surface")
+    mesh = lmap.mesh
+    e_v = radiosity / np.maximum(mesh.reflectance, 1e-6)
+    f = mesh.faces[hits.triangle_id]
+    u, v = hits.barycentric_uv[:, :1].astype(np.float64), hits.barycentric_uv[:, 1:].astype(np.float64)
+    return (1 - u - v) * e_v[f[:, 0]] + u * e_v[f[:, 1]] + v * e_v[f[:, 2]]

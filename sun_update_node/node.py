@@ -1,0 +1,112 @@
+"""``sun_update_node``: publishes the sun direction and streams B̂_sun updates in chunks (paper §III-E).
+
+Publishes ``/sun/direction`` (geometry_msgs/Vector3Stamped, unit vector towards the sun in the map frame) at
+``direction_rate_hz`` and ``/radiosity/sun_chunk`` (sensor_msgs/PointCloud2 with fields ``vertex`` uint32 and ``r g
+b`` float32: B̂_sun of a contiguous vertex range; ``header.stamp`` is the sun time of the update — its epoch; the
+chunks of an epoch cover every vertex of the lighting map exactly once, so a subscriber holding the same map knows
+an epoch is complete when it has all vertices). Time is the node clock: with ``use_sim_time`` it follows /clock,
+e.g. from ``lightfast bag play --clock``.
+"""
+from __future__ import annotations
+
+import sys
+
+import numpy as np
+import rclpy
+from geometry_msgs.msg import Vector3, Vector3Stamped
+from rclpy.node import Node
+from sensor_msgs.msg import PointCloud2
+
+from lightfast.config import ConfigError
+from lightfast.daylight.lighting_map import LightingMap
+from lightfast.daylight.sun import Site
+from lightfast.daylight.sun_update import SunChunk, SunUpdateConfig, SunUpdatePipeline
+from lightfast.errors import LightfastError
+from lightfast.ros.convert import make_header, numpy_to_pointcloud2
+from lightfast.ros.params import ConfigParameters
+from lightfast.ros.qos import LATCHED_QOS, SENSOR_QOS
+from lightfast.ros.transport import use_local_transport
+
+CHUNK_DTYPE = np.dtype([("vertex", "<u4"), ("r", "<f4"), ("g", "<f4"), ("b", "<f4")])
+
+
+def chunk_to_array(chunk: SunChunk) -> np.ndarray:
+    out = np.empty(len(chunk.radiosity), dtype=CHUNK_DTYPE)
+    out["vertex"] = chunk.vertex_ids
+    out["r"], out["g"], out["b"] = chunk.radiosity.T
+    return out
+
+
+class SunUpdateNode(Node):
+    def __init__(self, **kwargs: object) -> None:
+        super().__init__("sun_update_node", **kwargs)
+        self.params = ConfigParameters(self, SunUpdateConfig)
+        cfg = self.params.config
+        if not cfg.lighting_map:
+            raise ConfigError("parameter lighting_map is required (a directory made by `lightfast daylight prepare`)")
+        lmap = LightingMap.load(cfg.lighting_map)
+        site = Site.from_yaml(cfg.site_file) if cfg.site_file else None
+        self.pipeline = SunUpdatePipeline(lmap, cfg, site=site)
+        self.params.on_change = self._reconfigure
+        self.direction_pub = self.create_publisher(Vector3Stamped, "/sun/direction", LATCHED_QOS)
+        self.chunk_pub = self.create_publisher(PointCloud2, "/radiosity/sun_chunk", SENSOR_QOS)
+        self.direction_timer = self.create_timer(1.0 / cfg.direction_rate_hz, self._publish_direction)
+        self.step_timer = self.create_timer(cfg.step_period_s, self._step)
+        self.get_logger().info(
+            f"lighting map {cfg.lighting_map}: {lmap.num_vertices} vertices, {lmap.patches.count} patches; "
+            f"site {self.pipeline.site.latitude_deg:.4f}, {self.pipeline.site.longitude_deg:.4f}"
+        )
+
+    def _now_ns(self) -> int | None:
+        now = self.get_clock().now().nanoseconds
+        return now if now > 0 else None  # use_sim_time before the first /clock message
+
+    def _reconfigure(self, cfg: SunUpdateConfig) -> None:
+        self.pipeline.config = cfg
+        self.direction_timer.timer_period_ns = int(1e9 / cfg.direction_rate_hz)
+        self.step_timer.timer_period_ns = int(cfg.step_period_s * 1e9)
+
+    def _publish_direction(self) -> None:
+        now = self._now_ns()
+        if now is None:
+            return
+        d = self.pipeline.sun(now).direction_map
+        msg = Vector3Stamped(header=make_header(now, self.pipeline.config.frame_id),
+                             vector=Vector3(x=float(d[0]), y=float(d[1]), z=float(d[2])))
+        self.direction_pub.publish(msg)
+
+    def _step(self) -> None:
+        now = self._now_ns()
+        if now is None:
+            return
+        try:
+            chunk = self.pipeline.step(now)
+        except LightfastError as exc:  # keep the last good state and try again next period
+            self.get_logger().error(f"sun update step failed: {exc}", throttle_duration_sec=5.0)
+            return
+        if chunk is not None:
+            self.chunk_pub.publish(numpy_to_pointcloud2(chunk_to_array(chunk), stamp_ns=chunk.epoch_ns,
+                                                        frame_id=self.pipeline.config.frame_id))
+
+
+def main(args: list[str] | None = None) -> int:
+    use_local_transport()
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = SunUpdateNode()
+        rclpy.spin(node)
+    except (LightfastError, ConfigError) as exc:
+        print(f"sun_update_node: error: {exc}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        pass
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

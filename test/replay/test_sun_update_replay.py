@@ -1,0 +1,55 @@
+"""sun_update_node as its own process, driven by /clock from `lightfast bag play --clock`."""
+from __future__ import annotations
+
+import datetime as dt
+import sys
+from collections import defaultdict
+from pathlib import Path
+
+import numpy as np
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import PointCloud2
+
+from lightfast.bag import BagWriter
+from lightfast.daylight.lighting_map import LightingMap
+from lightfast.ros.convert import pointcloud2_to_numpy, stamp_to_ns
+from lightfast.ros.spin import spin_until
+from test.helpers import LIGHTFAST, bounded_process, child_env, run_bounded
+
+START_NS = int(dt.datetime(2026, 6, 21, 11, 0, tzinfo=dt.UTC).timestamp() * 1e9)
+
+
+def tick_bag(path: Path, seconds: float = 4.0, hz: float = 20.0) -> Path:
+    with BagWriter(path) as bag:
+        bag.add_topic("/tick", "std_msgs/msg/Header")
+        Header, Time = bag.typestore.types["std_msgs/msg/Header"], bag.typestore.types["builtin_interfaces/msg/Time"]
+        for i in range(int(seconds * hz)):
+            t = START_NS + int(i * 1e9 / hz)
+            bag.write_message("/tick", t, Header(stamp=Time(sec=t // 10**9, nanosec=t % 10**9), frame_id="x"))
+    return path
+
+
+def test_node_follows_bag_clock(tmp_path: Path, tiny_lighting_map: Path, domain_id: int, make_node,
+                                executor) -> None:
+    chunks: dict[int, list[np.ndarray]] = defaultdict(list)
+    node = make_node("listener")
+    node.create_subscription(PointCloud2, "/radiosity/sun_chunk",
+                             lambda m: chunks[stamp_to_ns(m.header.stamp)].append(pointcloud2_to_numpy(m)),
+                             QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE))
+    V = LightingMap.load(tiny_lighting_map).num_vertices
+    env = child_env(domain_id)
+    cmd = [sys.executable, "-m", "sun_update_node.node", "--ros-args", "-p", f"lighting_map:={tiny_lighting_map}",
+           "-p", "use_sim_time:=true", "-p", "chunk_vertices:=400", "-p", "step_period_s:=0.01",
+           "-p", "update_period_s:=1.0"]
+    with bounded_process(cmd, timeout_s=120, env=env) as proc:
+        assert spin_until(executor, lambda: node.count_publishers("/radiosity/sun_chunk") == 1, timeout_s=60)
+        assert not chunks  # no /clock yet: the node waits
+        play = run_bounded([*LIGHTFAST, "bag", "play", str(tick_bag(tmp_path / "ticks")), "--clock", "100"],
+                           timeout_s=60, env=env)
+        assert play.returncode == 0, play.stderr
+        spin_until(executor, lambda: False, timeout_s=0.5)  # let the last chunks arrive
+        proc.terminate()
+        proc.communicate(timeout=30)
+    complete = [e for e, parts in chunks.items() if sum(len(p) for p in parts) == V]
+    assert complete, {e: sum(len(p) for p in parts) for e, parts in chunks.items()}
+    assert all(START_NS <= e <= START_NS + 10 * 10**9 for e in chunks)  # stamped in bag time, not wall time
