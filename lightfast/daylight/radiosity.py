@@ -163,10 +163,16 @@ class PatchTransport:
         for start in range(0, P, block):
             rows = slice(start, min(P, start + block))
             front_p, front_q, r2 = _pair_geometry(patches.sample_point_m, patches.normal, rows, slice(0, P))
-            # K = A_q cosθ_p cosθ_q / (π r² + A_q) with cosθ = front / r
-            with np.errstate(divide="ignore", invalid="ignore"):
-                k = area * np.maximum(front_p, 0) * np.maximum(front_q, 0) / (r2 * (np.float32(np.pi) * r2 + area))
-            gather[rows] = np.where(visible[rows] & (r2 > 0), k, np.float32(0.0))
+            # K = A_q cosθ_p cosθ_q / (π r² + A_q) with cosθ = front / r, computed in place
+            np.maximum(front_p, 0, out=front_p)
+            np.maximum(front_q, 0, out=front_q)
+            front_p *= front_q
+            front_p *= area
+            denom = np.float32(np.pi) * r2
+            denom += area
+            denom *= r2
+            front_p[~visible[rows] | (r2 <= 0)] = 0.0
+            np.divide(front_p, denom, out=gather[rows], where=denom > 0)
         if normalize:
             sums = gather.sum(axis=1, dtype=np.float64)
             scale = np.where(sums > 0, coverage / np.where(sums > 0, sums, 1.0), 0.0)
@@ -183,14 +189,22 @@ def _upper(rows: slice, cols: slice) -> NDArray[np.bool_]:
 def _pair_geometry(points: NDArray[np.float64], normals: NDArray[np.float64], rows: slice, cols: slice
                    ) -> tuple[NDArray[np.float32], NDArray[np.float32], NDArray[np.float32]]:
     """For patch pairs (p in rows, q in cols), with matrix products only: ``n_p·(c_q − c_p)`` (q in front of p),
-    ``−n_q·(c_q − c_p)`` (p in front of q) and ``|c_q − c_p|²``, as float32 (rows × cols)."""
-    c = points.astype(np.float64)
-    n = normals.astype(np.float64)
+    ``−n_q·(c_q − c_p)`` (p in front of q) and ``|c_q − c_p|²``, as float32 (rows × cols).
+
+    Coordinates are centred first so that float32 keeps ~1e-6 m² of precision in ``|c|² + |c'|² − 2 c·c'``."""
+    c = (points - points.mean(axis=0)).astype(np.float32)
+    n = normals.astype(np.float32)
     cp, cq, np_, nq = c[rows], c[cols], n[rows], n[cols]
-    front_p = np_ @ cq.T - np.sum(np_ * cp, axis=1)[:, None]
-    front_q = (cp @ nq.T) - np.sum(nq * cq, axis=1)[None, :]
-    r2 = np.sum(cp**2, axis=1)[:, None] + np.sum(cq**2, axis=1)[None, :] - 2.0 * (cp @ cq.T)
-    return front_p.astype(np.float32), front_q.astype(np.float32), np.maximum(r2, 0.0).astype(np.float32)
+    front_p = np_ @ cq.T
+    front_p -= np.einsum("ij,ij->i", np_, cp)[:, None]
+    front_q = cp @ nq.T
+    front_q -= np.einsum("ij,ij->i", nq, cq)[None, :]
+    r2 = cp @ cq.T
+    r2 *= -2.0
+    r2 += np.einsum("ij,ij->i", cp, cp)[:, None]
+    r2 += np.einsum("ij,ij->i", cq, cq)[None, :]
+    np.maximum(r2, 0.0, out=r2)
+    return front_p, front_q, r2
 
 
 class PatchRadiositySolver:
