@@ -18,37 +18,13 @@ import sys
 import time
 from pathlib import Path
 
-import numpy as np
-
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from lightfast.daylight.lighting_map import LightingMapConfig, prepare_lighting_map  # noqa: E402
-from lightfast.daylight.sun import FREIBURG  # noqa: E402
-from lightfast.daylight.sun_update import sun_radiosity  # noqa: E402
-from lightfast.daylight.validation import Agreement, irradiance_at_points  # noqa: E402
+from lightfast.daylight.lighting_map import LightingMapConfig  # noqa: E402
+from lightfast.daylight.validation import TARGET_MEDIAN, TARGET_R, compare_with_radiance  # noqa: E402
 from lightfast.io import write_text_atomic  # noqa: E402
-from lightfast.sim.radiance_oracle import radiance_irradiance  # noqa: E402
-from lightfast.sim.validation_rooms import box_room_with_window, furnished_room, sample_surface_points  # noqa: E402
-
-#: The sun through a south window, 35° up and 20° west of south (map = ENU).
-SUN_DIRECTION = np.array([-np.sin(np.radians(20)) * np.cos(np.radians(35)),
-                          -np.cos(np.radians(20)) * np.cos(np.radians(35)), np.sin(np.radians(35))])
-TARGET_MEDIAN, TARGET_R = 0.10, 0.98
-
-
-def compare_room(mesh, *, points: int, seed: int, repeats: int, config: LightingMapConfig,
-                 sun_disk_samples: int = 19) -> dict[str, Agreement]:
-    lmap = prepare_lighting_map(mesh, FREIBURG, config)
-    pts, nrm = sample_surface_points(mesh, points, seed=seed)
-    ours = {"sky": lmap.sky_radiosity, "ground": lmap.ground_radiosity, "sun": sun_radiosity(lmap, SUN_DIRECTION)}
-    out = {}
-    for component, radiosity in ours.items():
-        ref = radiance_irradiance(mesh, pts, nrm, component=component, repeats=repeats,
-                                  sun_direction=SUN_DIRECTION if component == "sun" else None,
-                                  sun_disk_samples=sun_disk_samples if component == "sun" else 1)
-        out[component] = Agreement.of(irradiance_at_points(lmap, radiosity, pts, nrm), ref)
-    return out
+from lightfast.sim.validation_rooms import box_room_with_window, furnished_room  # noqa: E402
 
 
 def main() -> int:
@@ -64,7 +40,7 @@ def main() -> int:
     rows, results, plots = [], {}, {}
     for name, mesh in rooms.items():
         t0 = time.perf_counter()
-        res = compare_room(mesh, points=args.points, seed=1, repeats=args.repeats, config=config)
+        res = compare_with_radiance(mesh, points=args.points, seed=1, repeats=args.repeats, config=config)
         elapsed = time.perf_counter() - t0
         for comp, a in res.items():
             ok = a.median_relative_error <= TARGET_MEDIAN and a.pearson_r >= TARGET_R
@@ -78,9 +54,9 @@ def main() -> int:
     text = "\n".join([
         "# Normalized radiosity vs Radiance",
         "",
-        f"{args.points} surface points per room (away from creases), mesh tessellation {args.tessellation * 100:.0f} cm,"
-        f" lighting map defaults (10 cm patches, {config.sky_directions} sky+ground directions, {config.sun_samples} "
-        "sun samples); Radiance `rtrace -I -ab 8 -aa 0 -ad 2048 -as 0`, "
+        f"{args.points} surface points per room (away from creases), mesh tessellation "
+        f"{args.tessellation * 100:.0f} cm, lighting map defaults (10 cm patches, {config.sky_directions} sky+ground "
+        f"directions, {config.sun_samples} sun samples); Radiance `rtrace -I -ab 8 -aa 0 -ad 2048 -as 0`, "
         f"{args.repeats} samples per point, sun as 19 sub-disks of the 0.533° disk. "
         "Irradiance after one best-fit scale per component. `python benchmarks/radiance_validation.py`.",
         "",

@@ -11,7 +11,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from lightfast.daylight.lighting_map import LightingMap
+from lightfast.daylight.lighting_map import LightingMap, LightingMapConfig, prepare_lighting_map
+from lightfast.daylight.mesh import ReflectanceMesh
 
 
 @dataclass(frozen=True)
@@ -47,3 +48,30 @@ def irradiance_at_points(lmap: LightingMap, radiosity: NDArray[np.float32], poin
     f = mesh.faces[hits.triangle_id]
     u, v = hits.barycentric_uv[:, :1].astype(np.float64), hits.barycentric_uv[:, 1:].astype(np.float64)
     return (1 - u - v) * e_v[f[:, 0]] + u * e_v[f[:, 1]] + v * e_v[f[:, 2]]
+
+
+#: The sun through a south window, 35° up and 20° west of south (map = ENU).
+SUN_DIRECTION = np.array([-np.sin(np.radians(20)) * np.cos(np.radians(35)),
+                          -np.cos(np.radians(20)) * np.cos(np.radians(35)), np.sin(np.radians(35))])
+TARGET_MEDIAN, TARGET_R = 0.10, 0.98
+
+
+def compare_with_radiance(mesh: ReflectanceMesh, *, points: int, seed: int, repeats: int,
+                          config: LightingMapConfig, sun_disk_samples: int = 19) -> dict[str, Agreement]:
+    """Prepare a lighting map of ``mesh`` and compare its sky, ground and sun irradiance with Radiance at
+    ``points`` surface points (see :mod:`lightfast.sim.radiance_oracle`)."""
+    from lightfast.daylight.sun import FREIBURG
+    from lightfast.daylight.sun_update import sun_radiosity
+    from lightfast.sim.radiance_oracle import radiance_irradiance
+    from lightfast.sim.validation_rooms import sample_surface_points
+
+    lmap = prepare_lighting_map(mesh, FREIBURG, config)
+    pts, nrm = sample_surface_points(mesh, points, seed=seed)
+    ours = {"sky": lmap.sky_radiosity, "ground": lmap.ground_radiosity, "sun": sun_radiosity(lmap, SUN_DIRECTION)}
+    out = {}
+    for component, radiosity in ours.items():
+        ref = radiance_irradiance(mesh, pts, nrm, component=component, repeats=repeats,
+                                  sun_direction=SUN_DIRECTION if component == "sun" else None,
+                                  sun_disk_samples=sun_disk_samples if component == "sun" else 1)
+        out[component] = Agreement.of(irradiance_at_points(lmap, radiosity, pts, nrm), ref)
+    return out

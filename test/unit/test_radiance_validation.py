@@ -2,24 +2,19 @@
 Radiance (rtrace -I, 8 bounces) in the window room, with the same targets as the full benchmark."""
 from __future__ import annotations
 
-import sys
-from pathlib import Path
-
 import pytest
 
 from lightfast.daylight.lighting_map import LightingMapConfig
+from lightfast.daylight.validation import TARGET_MEDIAN, TARGET_R, compare_with_radiance
 from lightfast.sim.radiance_oracle import radiance_available
 from lightfast.sim.validation_rooms import furnished_room
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
-from radiance_validation import TARGET_MEDIAN, TARGET_R, compare_room  # noqa: E402
 
 pytestmark = pytest.mark.skipif(not radiance_available(), reason="Radiance binaries (pyradiance) not found")
 
 
 def test_furnished_room_agrees_with_radiance() -> None:
     config = LightingMapConfig(patch_size_m=0.15, sky_directions=1024, hemisphere_rays=128)
-    results = compare_room(furnished_room(tessellation_m=0.15), points=40, seed=3, repeats=1, config=config,
+    results = compare_with_radiance(furnished_room(tessellation_m=0.15), points=40, seed=3, repeats=1, config=config,
                            sun_disk_samples=7)
     for component, a in results.items():
         assert a.median_relative_error <= TARGET_MEDIAN, (component, a.median_relative_error)
