@@ -203,7 +203,7 @@ class LightingMap:
             normal=a["patch_normal"],
             reflectance=a["patch_reflectance"],
             sample_point_m=a["patch_sample_point_m"],
-            vertex_to_patch=csr("vertex_to_patch"),
+            vertex_to_patch=sp.csc_matrix(csr("vertex_to_patch")),
             patch_to_vertex=csr("patch_to_vertex"),
         )
         visible = np.unpackbits(a["visibility_bits"], count=P * P).reshape(P, P).astype(bool)

@@ -36,7 +36,7 @@ class Patches:
     normal: NDArray[np.float64]  # (P, 3) unit
     reflectance: NDArray[np.float64]  # (P, 3)
     sample_point_m: NDArray[np.float64]  # (P, 3), on the surface
-    vertex_to_patch: sp.csr_matrix  # (P, V)
+    vertex_to_patch: sp.csc_matrix  # (P, V), column-compressed: sun updates take it a block of vertices at a time
     patch_to_vertex: sp.csr_matrix  # (V, P)
 
     @property
@@ -95,7 +95,7 @@ def build_patches(
     rows = np.repeat(face_patch, 3)
     cols = mesh.faces.reshape(-1)
     vals = np.repeat(fa / 3.0, 3) / safe_area[rows]
-    vertex_to_patch = sp.csr_matrix((vals, (rows, cols)), shape=(n_patches, mesh.num_vertices))
+    vertex_to_patch = sp.csc_matrix((vals, (rows, cols)), shape=(n_patches, mesh.num_vertices))
     vertex_to_patch.sum_duplicates()
 
     patch_to_vertex = _interpolation_matrix(
