@@ -85,6 +85,9 @@ class LightingMap:
     sky_radiosity: NDArray[np.float32]  # (V, 3) B̂_sky
     ground_radiosity: NDArray[np.float32]  # (V, 3) B̂_grd
 
+    def __post_init__(self) -> None:
+        _ = self.mesh.vertex_normals  # computed once here, not inside the first bounded sun-update step
+
     @cached_property
     def caster(self) -> RayCaster:
         return RayCaster(self.mesh.vertices_m, self.mesh.faces)

@@ -76,9 +76,12 @@ class ReflectanceMesh:
     @cached_property
     def face_normals_area2(self) -> NDArray[np.float64]:
         """Face normals scaled by twice the face area (the cross product of two edges)."""
-        v = self.vertices_m
-        a, b, c = v[self.faces[:, 0]], v[self.faces[:, 1]], v[self.faces[:, 2]]
-        return np.cross(b - a, c - a)
+        v = self.vertices_m.T  # (3, V): gathers by coordinate are contiguous
+        f = self.faces
+        e1 = v[:, f[:, 1]] - v[:, f[:, 0]]
+        e2 = v[:, f[:, 2]] - v[:, f[:, 0]]
+        return np.stack([e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2], e1[0] * e2[1] - e1[1] * e2[0]],
+                        axis=1)
 
     @cached_property
     def face_areas_m2(self) -> NDArray[np.float64]:
@@ -92,9 +95,8 @@ class ReflectanceMesh:
     @cached_property
     def vertex_areas_m2(self) -> NDArray[np.float64]:
         """A third of the area of every triangle a vertex belongs to."""
-        areas = np.zeros(self.num_vertices)
-        np.add.at(areas, self.faces.reshape(-1), np.repeat(self.face_areas_m2 / 3.0, 3))
-        return areas
+        return np.bincount(self.faces.reshape(-1), weights=np.repeat(self.face_areas_m2 / 3.0, 3),
+                           minlength=self.num_vertices)
 
     @cached_property
     def vertex_normals(self) -> NDArray[np.float64]:
@@ -102,9 +104,10 @@ class ReflectanceMesh:
         if self.normals_in is not None:
             n = self.normals_in
         else:
-            n = np.zeros((self.num_vertices, 3))
-            for k in range(3):
-                np.add.at(n, self.faces[:, k], self.face_normals_area2)
+            idx = self.faces.reshape(-1)
+            weighted = np.repeat(self.face_normals_area2, 3, axis=0)  # one row per (face, corner)
+            n = np.stack([np.bincount(idx, weights=weighted[:, k], minlength=self.num_vertices) for k in range(3)],
+                         axis=1)
         norm = np.linalg.norm(n, axis=1, keepdims=True)
         return np.where(norm > 1e-12, n / np.maximum(norm, 1e-300), 0.0)
 
