@@ -171,6 +171,15 @@ def _cmd_daylight_sun(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_sim_daylight(args: argparse.Namespace) -> int:
+    from lightfast.sim.daylight_recordings import main_sim_daylight
+
+    code = main_sim_daylight(args.rest)
+    if code == 0:
+        print(f"daylight recordings in {args.rest[0] if args.rest else '?'}")
+    return code
+
+
 def _cmd_dds_env(_args: argparse.Namespace) -> int:
     from lightfast.ros.transport import local_transport_env
 
@@ -267,6 +276,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("site", help="site YAML")
     p.add_argument("--time", help="ISO 8601 time (default now); without an offset the site's time zone is used")
     p.set_defaults(func=_cmd_daylight_sun)
+
+    sim = sub.add_parser("sim", help="simulators that write recordings with ground truth")
+    sim_sub = sim.add_subparsers(dest="sim_command", required=True, metavar="SIMULATOR")
+    p = sim_sub.add_parser("daylight", add_help=False, prefix_chars="\0",
+                           help="indoor daylight RGB-D sequences DS1.T1-T6, DS2.T1-T6 (see `sim daylight --help`)")
+    p.add_argument("rest", nargs=argparse.REMAINDER)
+    p.set_defaults(func=_cmd_sim_daylight)
 
     dds = sub.add_parser("dds", help="DDS transport settings")
     dds_sub = dds.add_subparsers(dest="dds_command", required=True, metavar="DDS_COMMAND")
