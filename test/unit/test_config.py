@@ -83,3 +83,14 @@ def test_fields_need_param() -> None:
     with pytest.raises(ConfigError, match=r"declare configuration fields with lightfast\.config\.param"):
         Bad()
     assert [s.name for s in field_specs(SampleConfig)][:2] == ["chunk_size", "period_s"]
+
+
+def test_committed_node_parameter_files_are_current() -> None:
+    """config/<node>.yaml is generated from the config dataclasses (`lightfast config write`)."""
+    from pathlib import Path
+
+    from lightfast.nodes import NODE_CONFIGS, write_node_configs
+
+    config_dir = Path(__file__).resolve().parents[2] / "config"
+    assert write_node_configs(config_dir, check=True) == []
+    assert sorted(p.stem for p in config_dir.glob("*.yaml")) == sorted(NODE_CONFIGS)
