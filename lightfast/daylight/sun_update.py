@@ -78,10 +78,11 @@ class SunUpdate:
     def done(self) -> bool:
         return self._phase == "done"
 
-    def estimated_steps(self) -> int:
-        """Steps this update takes (transport steps estimated as the configured or a typical iteration count)."""
-        transport = self.lmap.config.iterations or 30
-        return 2 * len(self._blocks) + (transport if self.sun_visible else 1)
+    @staticmethod
+    def estimate_steps(num_vertices: int, chunk_vertices: int, iterations: int) -> int:
+        """Steps an update takes: a direct and an output step per vertex block, plus the transport iterations
+        (``iterations``, or a typical 30 when iterating to convergence)."""
+        return 2 * -(-num_vertices // chunk_vertices) + (iterations or 30)
 
     def step(self) -> SunChunk | None:
         """Do one bounded unit of work; returns a finished chunk during the output phase, else ``None``."""
@@ -180,8 +181,9 @@ class SunUpdatePipeline:
     def step(self, now_ns: int) -> SunChunk | None:
         """Advance the running update by one step (starting one if due); returns a finished chunk or ``None``."""
         if self._due(now_ns):
-            probe = SunUpdate(self.lmap, (0.0, 0.0, 1.0), chunk_vertices=self.config.chunk_vertices)
-            finish_ns = int(now_ns + probe.estimated_steps() * self.config.step_period_s * 1e9)
+            steps = SunUpdate.estimate_steps(self.lmap.num_vertices, self.config.chunk_vertices,
+                                             self.lmap.config.iterations)
+            finish_ns = int(now_ns + steps * self.config.step_period_s * 1e9)
             direction = self.sun(finish_ns).direction_map
             self.current = SunUpdate(self.lmap, direction, epoch_ns=finish_ns,
                                      chunk_vertices=self.config.chunk_vertices)
