@@ -26,6 +26,7 @@ from lightfast.ros.convert import make_header, numpy_to_pointcloud2
 from lightfast.ros.params import ConfigParameters
 from lightfast.ros.qos import LATCHED_QOS, SENSOR_QOS
 from lightfast.ros.transport import use_local_transport
+from lightfast.topics import SUN_CHUNK_TOPIC, SUN_DIRECTION_TOPIC
 
 CHUNK_DTYPE = np.dtype([("vertex", "<u4"), ("r", "<f4"), ("g", "<f4"), ("b", "<f4")])
 
@@ -48,8 +49,8 @@ class SunUpdateNode(Node):
         site = Site.from_yaml(cfg.site_file) if cfg.site_file else None
         self.pipeline = SunUpdatePipeline(lmap, cfg, site=site)
         self.params.on_change = self._reconfigure
-        self.direction_pub = self.create_publisher(Vector3Stamped, "/sun/direction", LATCHED_QOS)
-        self.chunk_pub = self.create_publisher(PointCloud2, "/radiosity/sun_chunk", SENSOR_QOS)
+        self.direction_pub = self.create_publisher(Vector3Stamped, SUN_DIRECTION_TOPIC, LATCHED_QOS)
+        self.chunk_pub = self.create_publisher(PointCloud2, SUN_CHUNK_TOPIC, SENSOR_QOS)
         self.direction_timer = self.create_timer(1.0 / cfg.direction_rate_hz, self._publish_direction)
         self.step_timer = self.create_timer(cfg.step_period_s, self._step)
         self.get_logger().info(

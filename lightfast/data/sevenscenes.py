@@ -41,16 +41,18 @@ from lightfast.geometry import project_to_so3
 from lightfast.progress import track
 from lightfast.ros.convert import camera_info_from_camera, matrix_to_pose_stamped, numpy_to_image
 from lightfast.ros.msgtypes import rosbags_types
+from lightfast.topics import (
+    COLOR_INFO_TOPIC,
+    COLOR_TOPIC,
+    DEPTH_INFO_TOPIC,
+    DEPTH_TOPIC,
+    GT_POSE_TOPIC,
+    MAP_FRAME,
+    OPTICAL_FRAME,
+)
 
 log = logging.getLogger(__name__)
 
-COLOR_TOPIC = "/camera/color/image_raw"
-COLOR_INFO_TOPIC = "/camera/color/camera_info"
-DEPTH_TOPIC = "/camera/depth/image_raw"
-DEPTH_INFO_TOPIC = "/camera/depth/camera_info"
-GT_POSE_TOPIC = "/ground_truth/pose"
-OPTICAL_FRAME = "camera_color_optical_frame"
-MAP_FRAME = "map"
 #: 2013-06-01T12:00:00Z, an arbitrary fixed start (the data set has no timestamps).
 DEFAULT_START_NS = 1_370_088_000 * 10**9
 INVALID_DEPTH_MM = 65535

@@ -93,6 +93,15 @@ from lightfast.sim.sky_model import (
     luminance,
     sun_rgb,
 )
+from lightfast.topics import (
+    COLOR_INFO_TOPIC,
+    COLOR_TOPIC,
+    DEPTH_INFO_TOPIC,
+    DEPTH_TOPIC,
+    GT_POSE_TOPIC,
+    MAP_FRAME,
+    OPTICAL_FRAME,
+)
 
 __all__ = [
     "SEQUENCES",
@@ -109,13 +118,6 @@ log = logging.getLogger(__name__)
 
 #: Bump when the output of the same parameters changes.
 FORMAT_VERSION = 1
-COLOR_TOPIC = "/camera/color/image_raw"
-COLOR_INFO_TOPIC = "/camera/color/camera_info"
-DEPTH_TOPIC = "/camera/depth/image_raw"
-DEPTH_INFO_TOPIC = "/camera/depth/camera_info"
-GT_POSE_TOPIC = "/ground_truth/pose"
-OPTICAL_FRAME = "camera_color_optical_frame"
-MAP_FRAME = "map"
 
 
 @dataclass(frozen=True)
