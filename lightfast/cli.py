@@ -180,6 +180,12 @@ def _cmd_sim_daylight(args: argparse.Namespace) -> int:
     return code
 
 
+def _cmd_crf_calibrate(args: argparse.Namespace) -> int:
+    from lightfast.daylight.crf import main_crf_calibrate
+
+    return main_crf_calibrate(args.rest)
+
+
 def _cmd_dds_env(_args: argparse.Namespace) -> int:
     from lightfast.ros.transport import local_transport_env
 
@@ -283,6 +289,13 @@ def build_parser() -> argparse.ArgumentParser:
                            help="indoor daylight RGB-D sequences DS1.T1-T6, DS2.T1-T6 (see `sim daylight --help`)")
     p.add_argument("rest", nargs=argparse.REMAINDER)
     p.set_defaults(func=_cmd_sim_daylight)
+
+    crf = sub.add_parser("crf", help="camera response function")
+    crf_sub = crf.add_subparsers(dest="crf_command", required=True, metavar="CRF_COMMAND")
+    p = crf_sub.add_parser("calibrate", add_help=False, prefix_chars="\0",
+                           help="fit the camera response from an exposure bracket (see `crf calibrate --help`)")
+    p.add_argument("rest", nargs=argparse.REMAINDER)
+    p.set_defaults(func=_cmd_crf_calibrate)
 
     dds = sub.add_parser("dds", help="DDS transport settings")
     dds_sub = dds.add_subparsers(dest="dds_command", required=True, metavar="DDS_COMMAND")

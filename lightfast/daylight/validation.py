@@ -56,10 +56,28 @@ SUN_DIRECTION = np.array([-np.sin(np.radians(20)) * np.cos(np.radians(35)),
 TARGET_MEDIAN, TARGET_R = 0.10, 0.98
 
 
+def snap_to_vertices(lmap: LightingMap, points_m: ArrayLike, normals: ArrayLike
+                     ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Move surface points to the nearest vertex of the triangle they lie on (keeping the face normal), so that
+    a comparison happens where the method's radiosity is defined, not inside triangles."""
+    p = np.asarray(points_m, dtype=np.float64)
+    n = np.asarray(normals, dtype=np.float64)
+    hits = lmap.caster.intersect(p + 1e-3 * n, -n, t_far_m=0.01)
+    if not np.all(hits.hit):
+        raise ValueError(f"{int(np.sum(~hits.hit))} points are not on the mesh surface")
+    corners = lmap.mesh.faces[hits.triangle_id]  # (N, 3)
+    d2 = np.sum((lmap.mesh.vertices_m[corners] - p[:, None, :]) ** 2, axis=2)
+    nearest = corners[np.arange(len(p)), np.argmin(d2, axis=1)]
+    return lmap.mesh.vertices_m[nearest].copy(), n
+
+
 def compare_with_radiance(mesh: ReflectanceMesh, *, points: int, seed: int, repeats: int,
-                          config: LightingMapConfig, sun_disk_samples: int = 19) -> dict[str, Agreement]:
+                          config: LightingMapConfig, sun_disk_samples: int = 19,
+                          at_vertices: bool = True) -> dict[str, Agreement]:
     """Prepare a lighting map of ``mesh`` and compare its sky, ground and sun irradiance with Radiance at
-    ``points`` surface points (see :mod:`lightfast.sim.radiance_oracle`)."""
+    ``points`` surface points (see :mod:`lightfast.sim.radiance_oracle`), snapped to mesh vertices unless
+    ``at_vertices`` is False (then our values are interpolated inside triangles, which blurs shadow edges over
+    a triangle)."""
     from lightfast.daylight.sun import FREIBURG
     from lightfast.daylight.sun_update import sun_radiosity
     from lightfast.sim.radiance_oracle import radiance_irradiance
@@ -67,6 +85,8 @@ def compare_with_radiance(mesh: ReflectanceMesh, *, points: int, seed: int, repe
 
     lmap = prepare_lighting_map(mesh, FREIBURG, config)
     pts, nrm = sample_surface_points(mesh, points, seed=seed)
+    if at_vertices:
+        pts, nrm = snap_to_vertices(lmap, pts, nrm)
     ours = {"sky": lmap.sky_radiosity, "ground": lmap.ground_radiosity, "sun": sun_radiosity(lmap, SUN_DIRECTION)}
     out = {}
     for component, radiosity in ours.items():
