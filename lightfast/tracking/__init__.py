@@ -1,0 +1,23 @@
+"""Camera tracking (paper §III-D): direct RGB-D alignment (Eq. 7) and trajectory metrics. ROS-free."""
+from __future__ import annotations
+
+from lightfast.tracking.metrics import align_umeyama, ate_rmse
+from lightfast.tracking.rgbd_odometry import (
+    AlignResult,
+    SequenceTrack,
+    TrackingConfig,
+    TrackingError,
+    align,
+    track_sequence,
+)
+
+__all__ = [
+    "AlignResult",
+    "SequenceTrack",
+    "TrackingConfig",
+    "TrackingError",
+    "align",
+    "align_umeyama",
+    "ate_rmse",
+    "track_sequence",
+]
