@@ -16,8 +16,7 @@ pytestmark = pytest.mark.skipif(not radiance_available(), reason="Radiance binar
 def test_window_room_agrees_with_radiance() -> None:
     config = LightingMapConfig(patch_size_m=0.15, sky_directions=1024, hemisphere_rays=128)
     results = compare_with_radiance(box_room_with_window(tessellation_m=0.15), points=30, seed=3, repeats=2,
-                                    config=config,
-                           sun_disk_samples=5)
+                                    config=config, sun_disk_samples=5)
     for component, a in results.items():
         assert a.median_relative_error <= TARGET_MEDIAN, (component, a.median_relative_error)
         assert a.pearson_r >= TARGET_R, (component, a.pearson_r)
