@@ -6,6 +6,7 @@ Exit codes: 0 success; 1 a lightfast error (one line on stderr, no traceback; ``
 from __future__ import annotations
 
 import argparse
+import importlib
 import logging
 import os
 import signal
@@ -171,19 +172,16 @@ def _cmd_daylight_sun(args: argparse.Namespace) -> int:
     return 0
 
 
-def _cmd_sim_daylight(args: argparse.Namespace) -> int:
-    from lightfast.sim.daylight_recordings import main_sim_daylight
+def _add_passthrough(subparsers: argparse._SubParsersAction, name: str, target: str, help_text: str) -> None:
+    """A subcommand whose arguments go to ``target`` ("module:function(argv) -> exit code"), which parses them."""
+    p = subparsers.add_parser(name, add_help=False, prefix_chars="\0", help=help_text)
+    p.add_argument("rest", nargs=argparse.REMAINDER)
 
-    code = main_sim_daylight(args.rest)
-    if code == 0:
-        print(f"daylight recordings in {args.rest[0] if args.rest else '?'}")
-    return code
+    def run_target(args: argparse.Namespace) -> int:
+        module, _, function = target.partition(":")
+        return getattr(importlib.import_module(module), function)(args.rest)
 
-
-def _cmd_crf_calibrate(args: argparse.Namespace) -> int:
-    from lightfast.daylight.crf import main_crf_calibrate
-
-    return main_crf_calibrate(args.rest)
+    p.set_defaults(func=run_target)
 
 
 def _cmd_dds_env(_args: argparse.Namespace) -> int:
@@ -285,17 +283,12 @@ def build_parser() -> argparse.ArgumentParser:
 
     sim = sub.add_parser("sim", help="simulators that write recordings with ground truth")
     sim_sub = sim.add_subparsers(dest="sim_command", required=True, metavar="SIMULATOR")
-    p = sim_sub.add_parser("daylight", add_help=False, prefix_chars="\0",
-                           help="indoor daylight RGB-D sequences DS1.T1-T6, DS2.T1-T6 (see `sim daylight --help`)")
-    p.add_argument("rest", nargs=argparse.REMAINDER)
-    p.set_defaults(func=_cmd_sim_daylight)
-
+    _add_passthrough(sim_sub, "daylight", "lightfast.sim.daylight_recordings:main_sim_daylight",
+                     "indoor daylight RGB-D sequences DS1.T1-T6, DS2.T1-T6 (see `sim daylight --help`)")
     crf = sub.add_parser("crf", help="camera response function")
     crf_sub = crf.add_subparsers(dest="crf_command", required=True, metavar="CRF_COMMAND")
-    p = crf_sub.add_parser("calibrate", add_help=False, prefix_chars="\0",
-                           help="fit the camera response from an exposure bracket (see `crf calibrate --help`)")
-    p.add_argument("rest", nargs=argparse.REMAINDER)
-    p.set_defaults(func=_cmd_crf_calibrate)
+    _add_passthrough(crf_sub, "calibrate", "lightfast.daylight.crf:main_crf_calibrate",
+                     "fit the camera response from an exposure bracket (see `crf calibrate --help`)")
 
     dds = sub.add_parser("dds", help="DDS transport settings")
     dds_sub = dds.add_subparsers(dest="dds_command", required=True, metavar="DDS_COMMAND")
