@@ -117,6 +117,17 @@ def _check_bottom_row(T: Array, name: str) -> None:
 # SO(3)
 
 
+def unit_vector(v: ArrayLike, name: str, *, error: type[Exception] = GeometryError) -> Array:
+    """``v`` normalized; raises ``error`` naming ``name`` unless it is a finite, non-zero 3-vector."""
+    a = np.asarray(v, dtype=np.float64).reshape(-1)
+    if a.shape != (3,) or not np.all(np.isfinite(a)):
+        raise error(f"{name} must be a finite 3-vector, got {v!r}")
+    norm = float(np.linalg.norm(a))
+    if norm < 1e-12:
+        raise error(f"{name} must be non-zero")
+    return a / norm
+
+
 def hat(v: ArrayLike) -> Array:
     """Skew-symmetric matrix ``(..., 3, 3)`` of ``v`` ``(..., 3)``: ``hat(v) @ w == cross(v, w)``."""
     v = _as_float(v, "v", (3,))

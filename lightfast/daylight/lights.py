@@ -17,6 +17,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from lightfast.errors import LightfastError
+from lightfast.geometry import unit_vector
 
 __all__ = [
     "GOLDEN_ANGLE",
@@ -110,16 +111,6 @@ def fibonacci_sphere(n: int) -> NDArray[np.float64]:
     return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=-1)
 
 
-def _unit(v: ArrayLike, name: str) -> NDArray[np.float64]:
-    a = np.asarray(v, dtype=np.float64)
-    if a.shape != (3,) or not np.all(np.isfinite(a)):
-        raise LightsError(f"{name} must be a finite 3-vector, got {v!r}")
-    norm = float(np.linalg.norm(a))
-    if norm < 1e-12:
-        raise LightsError(f"{name} must not be zero")
-    return a / norm
-
-
 def _frame_around(axis: NDArray[np.float64], hint: NDArray[np.float64]) -> NDArray[np.float64]:
     """Rotation (3, 3) whose third column is ``axis``; the first column is orthogonal to ``hint`` when possible."""
     ref = hint if np.linalg.norm(np.cross(axis, hint)) > 1e-6 else np.array([1.0, 0.0, 0.0])
@@ -149,7 +140,7 @@ def sky_and_ground(n_total: int, *, up: ArrayLike = (0.0, 0.0, 1.0)) -> tuple[Li
     """
     if isinstance(n_total, bool) or not isinstance(n_total, (int, np.integer)) or n_total < 2:
         raise LightsError(f"sky_and_ground needs an integer n_total >= 2, got {n_total!r}")
-    up_u = _unit(up, "up")
+    up_u = unit_vector(up, "up", error=LightsError)
     local = fibonacci_sphere(int(n_total))
     dirs = local @ _rotation_z_to(up_u).T
     is_sky = local[:, 2] > 0.0  # up · d in exact arithmetic; immune to rounding for the horizon point
@@ -182,10 +173,10 @@ def sun_disk(
         raise LightsError(f"sun_disk needs an integer n_samples >= 1, got {n_samples!r}")
     if not (math.isfinite(angular_diameter_deg) and 0.0 <= angular_diameter_deg < 180.0):
         raise LightsError(f"angular_diameter_deg must lie in [0, 180), got {angular_diameter_deg!r}")
-    centre = _unit(direction_to_sun, "direction_to_sun")
+    centre = unit_vector(direction_to_sun, "direction_to_sun", error=LightsError)
     hint = np.array([0.0, 0.0, 1.0])
     if horizon_up is not None:
-        hint = _unit(horizon_up, "horizon_up")
+        hint = unit_vector(horizon_up, "horizon_up", error=LightsError)
         if float(hint @ centre) <= 0.0:
             return LightSet(np.empty((0, 3)), np.empty(0), "sun")
     n = int(n_samples)

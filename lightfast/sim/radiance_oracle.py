@@ -54,6 +54,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from lightfast.daylight.mesh import ReflectanceMesh
 from lightfast.errors import LightfastError
+from lightfast.geometry import unit_vector
 
 Component = Literal["sun", "sky", "ground"]
 COMPONENTS: tuple[str, ...] = ("sun", "sky", "ground")
@@ -183,16 +184,6 @@ def _fmt(x: NDArray[np.float64]) -> str:
     return " ".join(f"{v:.9g}" for v in x)
 
 
-def _unit(v: ArrayLike, name: str) -> NDArray[np.float64]:
-    a = np.asarray(v, dtype=np.float64).reshape(-1)
-    if a.shape != (3,) or not np.all(np.isfinite(a)):
-        raise RadianceError(f"{name} must be a finite 3-vector, got {v!r}")
-    norm = float(np.linalg.norm(a))
-    if norm < 1e-12:
-        raise RadianceError(f"{name} must be non-zero")
-    return a / norm
-
-
 def _sun_disk(direction: NDArray[np.float64], samples: int) -> list[tuple[NDArray[np.float64], float]]:
     """``samples`` sub-suns tiling the sun disk: (unit direction, angular diameter in degrees) each, of equal solid
     angle ``Ω/samples``, centred on a sunflower (Vogel) pattern over the disk."""
@@ -222,14 +213,14 @@ def light_description(component: Component, *, sun_direction: ArrayLike | None =
             raise RadianceError('component "sun" needs sun_direction (unit vector towards the sun)')
         if int(sun_disk_samples) < 1:
             raise RadianceError(f"sun_disk_samples must be >= 1, got {sun_disk_samples}")
-        d = _unit(sun_direction, "sun_direction")
+        d = unit_vector(sun_direction, "sun_direction", error=RadianceError)
         radiance = 1.0 / SUN_SOLID_ANGLE_SR  # every sub-sun has the disk's radiance and 1/samples of its area
         parts = [f"void light sun_light\n0\n0\n3 {radiance:.9g} {radiance:.9g} {radiance:.9g}\n"]
         for k, (dk, diameter) in enumerate(_sun_disk(d, int(sun_disk_samples))):
             parts.append(f"sun_light source sun{k}\n0\n0\n4 {_fmt(dk)} {diameter:.9g}\n")
         return "\n".join(parts)
     if component in ("sky", "ground"):
-        u = _unit(up, "up")
+        u = unit_vector(up, "up", error=RadianceError)
         if component == "ground":
             u = -u + 0.0  # + 0.0: no "-0" in the file
         return (
