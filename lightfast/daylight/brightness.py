@@ -116,17 +116,19 @@ def _component_names(components: Mapping[str, ArrayLike], num_vertices: int) -> 
     return tuple(components)
 
 
-def _component_stack(components: Mapping[str, ArrayLike], num_vertices: int) -> tuple[tuple[str, ...], F32]:
+def _component_stack(components: Mapping[str, ArrayLike], rows: int, *, what: str = "component",
+                     like: str = "", dtype: type = np.float32) -> tuple[tuple[str, ...], np.ndarray]:
+    """Named (rows, 3) arrays stacked to (rows, K, 3), each checked for its shape."""
     if not components:
-        raise BrightnessError("need at least one radiosity component")
+        raise BrightnessError(f"need at least one radiosity {what}")
     names = tuple(components)
     arrays = []
     for name in names:
-        a = np.asarray(components[name], dtype=np.float32)
-        if a.shape != (num_vertices, 3):
-            raise BrightnessError(f"component {name!r} must have shape ({num_vertices}, 3), got {a.shape}")
+        a = np.asarray(components[name], dtype=dtype)
+        if a.shape != (rows, 3):
+            raise BrightnessError(f"{what} {name!r} must have shape ({rows}, 3){like}, got {a.shape}")
         arrays.append(a)
-    return names, np.stack(arrays, axis=1)  # (V, K, 3)
+    return names, np.stack(arrays, axis=1)
 
 
 def _cast(lmap: LightingMap, camera: PinholeCamera, T_map_cam: ArrayLike, stride_px: int
@@ -333,20 +335,11 @@ def fit_scales(
         if np.ndim(I_C) == 3:
             I_C = images.sample(I_C)
         images = images.images
-    if not images:
-        raise BrightnessError("need at least one radiosity image")
-    names = tuple(images)
     y_all = np.asarray(I_C, dtype=np.float64)
     if y_all.ndim != 2 or y_all.shape[1] != 3:
         raise BrightnessError(f"I_C must have shape (N, 3), got {y_all.shape}")
     n = len(y_all)
-    cols = []
-    for name in names:
-        a = np.asarray(images[name], dtype=np.float64)
-        if a.shape != (n, 3):
-            raise BrightnessError(f"image {name!r} must have shape ({n}, 3) like I_C, got {a.shape}")
-        cols.append(a)
-    B = np.stack(cols, axis=1)  # (N, K, 3)
+    names, B = _component_stack(images, n, what="image", like=" like I_C", dtype=np.float64)  # (N, K, 3)
     mask = np.ones(n, dtype=bool) if valid is None else np.asarray(valid, dtype=bool)
     if mask.shape != (n,):
         raise BrightnessError(f"valid must have shape ({n},), got {mask.shape}")
