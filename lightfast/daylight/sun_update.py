@@ -194,3 +194,63 @@ class SunUpdatePipeline:
         if self.current is None or self.current.done:
             return None
         return self.current.step()
+
+
+class SunEpochAssembler:
+    """Receiver side of the chunk stream (§III-E): collects the chunks of each epoch and hands out B̂_sun only
+    when an epoch covers every vertex, so a consumer swaps in a new B̂_sun atomically and never renders a mix.
+
+    Chunks of an older epoch than the newest one seen are dropped; a newer epoch replaces an unfinished one.
+    """
+
+    def __init__(self, num_vertices: int) -> None:
+        if num_vertices < 1:
+            raise ValueError(f"num_vertices must be >= 1, got {num_vertices}")
+        self.num_vertices = int(num_vertices)
+        self._epoch_ns: int | None = None
+        self._values = np.zeros((self.num_vertices, 3), dtype=np.float32)
+        self._have = np.zeros(self.num_vertices, dtype=bool)
+        self.completed_epoch_ns: int | None = None
+
+    @property
+    def pending_epoch_ns(self) -> int | None:
+        return self._epoch_ns
+
+    @property
+    def progress(self) -> float:
+        """Share of the vertices received for the pending epoch."""
+        return float(np.count_nonzero(self._have)) / self.num_vertices
+
+    def add(self, epoch_ns: int, vertex_ids: ArrayLike, radiosity: ArrayLike) -> NDArray[np.float32] | None:
+        """Add one chunk; returns the complete B̂_sun (V, 3) when this chunk completes its epoch, else ``None``.
+
+        Raises ValueError for chunks that do not fit this map (vertex ids out of range, wrong shapes, non-finite
+        or negative radiosity) — a stream from another lighting map."""
+        ids = np.asarray(vertex_ids)
+        rad = np.asarray(radiosity, dtype=np.float32)
+        if ids.ndim != 1 or rad.shape != (len(ids), 3):
+            raise ValueError(f"chunk needs (n,) vertex ids and (n, 3) radiosity, got {ids.shape} and {rad.shape}")
+        if len(ids) and (ids.min() < 0 or ids.max() >= self.num_vertices):
+            raise ValueError(f"chunk vertex ids span [{ids.min()}, {ids.max()}], outside this map's "
+                             f"{self.num_vertices} vertices (a stream for another lighting map?)")
+        if not np.all(np.isfinite(rad)) or np.any(rad < 0):
+            raise ValueError("chunk radiosity must be finite and non-negative")
+        epoch = int(epoch_ns)
+        if self.completed_epoch_ns is not None and epoch <= self.completed_epoch_ns:
+            return None  # late chunk of an epoch already swapped in (or older)
+        if self._epoch_ns is None or epoch > self._epoch_ns:
+            if self._epoch_ns is not None and self._have.any():
+                log.warning("sun epoch %d superseded at %.0f%% by epoch %d", self._epoch_ns, 100 * self.progress,
+                            epoch)
+            self._epoch_ns = epoch
+            self._have[:] = False
+        elif epoch < self._epoch_ns:
+            return None
+        self._values[ids] = rad
+        self._have[ids] = True
+        if not self._have.all():
+            return None
+        self.completed_epoch_ns = epoch
+        self._epoch_ns = None
+        self._have[:] = False
+        return self._values.copy()

@@ -4,20 +4,26 @@ from __future__ import annotations
 from lightfast.tracking.metrics import align_umeyama, ate_rmse
 from lightfast.tracking.rgbd_odometry import (
     AlignResult,
+    RGBDFrame,
     SequenceTrack,
     TrackingConfig,
     TrackingError,
     align,
+    align_frames,
+    prepare_frame,
     track_sequence,
 )
 
 __all__ = [
     "AlignResult",
+    "RGBDFrame",
     "SequenceTrack",
     "TrackingConfig",
     "TrackingError",
     "align",
+    "align_frames",
     "align_umeyama",
     "ate_rmse",
+    "prepare_frame",
     "track_sequence",
 ]

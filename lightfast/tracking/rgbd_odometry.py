@@ -55,6 +55,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 
 import cv2
+import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -66,10 +67,13 @@ from lightfast.geometry import se3_exp
 __all__ = [
     "TRACKING_MODES",
     "AlignResult",
+    "RGBDFrame",
     "SequenceTrack",
     "TrackingConfig",
     "TrackingError",
     "align",
+    "align_frames",
+    "prepare_frame",
     "track_sequence",
 ]
 
@@ -165,6 +169,21 @@ class SequenceTrack:
 # Frame preparation
 
 
+@dataclass(frozen=True, eq=False)
+class RGBDFrame:
+    """A frame prepared by :func:`prepare_frame`: pyramid ``levels`` (finest first) at ``camera``'s input size."""
+
+    levels: tuple[_Level, ...]
+    camera: PinholeCamera
+    pyramid_levels: int
+    resolution_scale: float
+
+    @property
+    def num_valid(self) -> int:
+        """Pixels with valid depth at the finest level."""
+        return len(self.levels[0].points)
+
+
 @dataclass(frozen=True)
 class _Level:
     camera: PinholeCamera
@@ -207,40 +226,74 @@ def _check_depth(depth_m: ArrayLike, name: str, cfg: TrackingConfig) -> NDArray[
 
 
 def _downsample_grey(grey: NDArray[np.float32]) -> NDArray[np.float32]:
+    """2×2 block means (``INTER_AREA`` at exactly half size)."""
     h, w = grey.shape[0] // 2, grey.shape[1] // 2
-    return grey[: 2 * h, : 2 * w].reshape(h, 2, w, 2).mean(axis=(1, 3), dtype=np.float32)
+    return cv2.resize(grey[: 2 * h, : 2 * w], (w, h), interpolation=cv2.INTER_AREA)
 
 
+@numba.njit(cache=True, nogil=True)
 def _downsample_depth(depth: NDArray[np.float32], discontinuity: float) -> NDArray[np.float32]:
+    """2×2 block means of the valid depths; 0 where no depth is valid or the block spans a discontinuity."""
     h, w = depth.shape[0] // 2, depth.shape[1] // 2
-    blocks = depth[: 2 * h, : 2 * w].reshape(h, 2, w, 2)
-    valid = blocks > 0
-    count = valid.sum(axis=(1, 3))
-    total = blocks.sum(axis=(1, 3))
-    hi = np.where(valid, blocks, -np.inf).max(axis=(1, 3))
-    lo = np.where(valid, blocks, np.inf).min(axis=(1, 3))
-    ok = (count > 0) & (hi - lo <= discontinuity)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(ok, total / np.maximum(count, 1), 0.0).astype(np.float32)
+    out = np.zeros((h, w), dtype=np.float32)
+    for i in range(h):
+        for j in range(w):
+            total = 0.0
+            count = 0
+            lo = np.inf
+            hi = -np.inf
+            for di in range(2):
+                for dj in range(2):
+                    d = depth[2 * i + di, 2 * j + dj]
+                    if d > 0.0:
+                        total += d
+                        count += 1
+                        lo = min(lo, d)
+                        hi = max(hi, d)
+            if count > 0 and hi - lo <= discontinuity:
+                out[i, j] = total / count
+    return out
 
 
-def _vertex_normal_map(depth: NDArray[np.float32], camera: PinholeCamera) -> tuple[NDArray[np.float32], ...]:
-    v, u = np.mgrid[0 : camera.height, 0 : camera.width].astype(np.float32)
-    z = np.where(depth > 0, depth, np.float32(np.nan))
-    V = np.stack([(u - camera.cx) / camera.fx * z, (v - camera.cy) / camera.fy * z, z], axis=-1)
-    du = np.full_like(V, np.nan)
-    dv = np.full_like(V, np.nan)
-    du[:, 1:-1] = V[:, 2:] - V[:, :-2]
-    dv[1:-1] = V[2:] - V[:-2]
-    n = np.cross(du, dv)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        n /= np.linalg.norm(n, axis=-1, keepdims=True)
-        flip = np.sum(n * V, axis=-1) > 0  # orient towards the camera
-    n[flip] *= -1.0
-    return V, n
+@numba.njit(cache=True, nogil=True)
+def _geometry_map(depth: NDArray[np.float32], fx: float, fy: float, cx: float, cy: float) -> NDArray[np.float32]:
+    """(H, W, 7): depth, vertex xyz (camera frame, m) and unit normal xyz facing the camera (from central
+    differences of the vertex map; NaN where the depth or a neighbour is missing)."""
+    h, w = depth.shape
+    out = np.full((h, w, 7), np.nan, dtype=np.float32)
+    for i in range(h):
+        for j in range(w):
+            z = depth[i, j]
+            out[i, j, 0] = z
+            if z > 0.0:
+                out[i, j, 1] = (j - cx) / fx * z
+                out[i, j, 2] = (i - cy) / fy * z
+                out[i, j, 3] = z
+    for i in range(1, h - 1):
+        for j in range(1, w - 1):
+            if not (depth[i, j] > 0.0):
+                continue
+            ax = out[i, j + 1, 1] - out[i, j - 1, 1]
+            ay = out[i, j + 1, 2] - out[i, j - 1, 2]
+            az = out[i, j + 1, 3] - out[i, j - 1, 3]
+            bx = out[i + 1, j, 1] - out[i - 1, j, 1]
+            by = out[i + 1, j, 2] - out[i - 1, j, 2]
+            bz = out[i + 1, j, 3] - out[i - 1, j, 3]
+            nx = ay * bz - az * by
+            ny = az * bx - ax * bz
+            nz = ax * by - ay * bx
+            norm = np.sqrt(nx * nx + ny * ny + nz * nz)
+            if not (norm > 0.0):  # also NaN: a neighbour without depth
+                continue
+            if nx * out[i, j, 1] + ny * out[i, j, 2] + nz * out[i, j, 3] > 0.0:
+                norm = -norm
+            out[i, j, 4] = nx / norm
+            out[i, j, 5] = ny / norm
+            out[i, j, 6] = nz / norm
+    return out
 
 
-def _prepare(rgb: ArrayLike, depth_m: ArrayLike, camera: PinholeCamera, cfg: TrackingConfig, role: str) -> list[_Level]:
+def _prepare(rgb: ArrayLike, depth_m: ArrayLike, camera: PinholeCamera, cfg: TrackingConfig, role: str) -> RGBDFrame:
     grey = _to_grey(np.asarray(rgb), f"{role}_rgb")
     depth = _check_depth(depth_m, f"{role}_depth_m", cfg)
     if grey.shape != camera.shape or depth.shape != camera.shape:
@@ -265,7 +318,7 @@ def _prepare(rgb: ArrayLike, depth_m: ArrayLike, camera: PinholeCamera, cfg: Tra
             raise TrackingError(
                 f"image too small for {cfg.pyramid_levels} pyramid levels: level {level} is {grey.shape}"
             )
-        V, N = _vertex_normal_map(depth, cam)
+        geometry = _geometry_map(depth, cam.fx, cam.fy, cam.cx, cam.cy)
         valid = depth > 0
         gu = cv2.Sobel(grey, cv2.CV_32F, 1, 0, ksize=3, borderType=cv2.BORDER_REPLICATE) * np.float32(0.125)
         gv = cv2.Sobel(grey, cv2.CV_32F, 0, 1, ksize=3, borderType=cv2.BORDER_REPLICATE) * np.float32(0.125)
@@ -274,28 +327,30 @@ def _prepare(rgb: ArrayLike, depth_m: ArrayLike, camera: PinholeCamera, cfg: Tra
                 camera=cam,
                 grey=grey,
                 depth=depth,
-                points=V[valid],
+                points=geometry[valid][:, 1:4],
                 point_grey=grey[valid],
                 grey_grad=np.ascontiguousarray(np.stack([grey, gu, gv], axis=-1)),
-                geometry=np.ascontiguousarray(np.concatenate([depth[..., None], V, N], axis=-1)),
+                geometry=geometry,
             )
         )
-    return levels
+    return RGBDFrame(tuple(levels), camera, cfg.pyramid_levels, cfg.resolution_scale)
+
+
+def prepare_frame(
+    rgb: ArrayLike, depth_m: ArrayLike, camera: PinholeCamera, *, config: TrackingConfig | None = None,
+    name: str = "frame",
+) -> RGBDFrame:
+    """Prepare one RGB-D frame (grey + depth pyramids, vertex and normal maps, image gradients) for
+    :func:`align_frames`, as a live (source) frame and as a reference (target) frame alike.
+
+    ``rgb``: ``(H, W, 3)`` RGB uint8 (or float in [0, 1]) or ``(H, W)`` grey; ``depth_m``: ``(H, W)`` float metres
+    (0 / NaN / outside ``[min_depth_m, max_depth_m]`` invalid); both at ``camera``'s size. ``name`` appears in errors.
+    """
+    return _prepare(rgb, depth_m, camera, TrackingConfig() if config is None else config, name)
 
 
 # --------------------------------------------------------------------------------------------------------------
 # Gauss–Newton
-
-
-def _huber_weight(r: NDArray[np.float32], delta: float) -> NDArray[np.float32]:
-    """IRLS weight of the Huber norm: 1 inside ``delta``, ``delta / |r|`` outside."""
-    return np.float32(delta) / np.maximum(np.abs(r), np.float32(delta))
-
-
-def _huber(r: NDArray[np.float32], delta: float) -> NDArray[np.float32]:
-    a = np.abs(r)
-    d = np.float32(delta)
-    return np.where(a <= d, np.float32(0.5) * r * r, d * (a - np.float32(0.5) * d))
 
 
 @dataclass
@@ -307,101 +362,139 @@ class _Terms:
     cost: float
 
 
-_REMAP_COLS = 1024  # cv2.remap needs maps smaller than 32767 in each dimension: sample along (rows, 1024)
+@numba.njit(cache=True, nogil=True, fastmath=False)
+def _accumulate(
+    points: NDArray[np.float32],
+    point_grey: NDArray[np.float32],
+    T: NDArray[np.float64],
+    intrinsics: NDArray[np.float64],
+    grey_grad: NDArray[np.float32],
+    geometry: NDArray[np.float32],
+    use_color: bool,
+    use_depth: bool,
+    trunc: float,
+    delta_c: float,
+    delta_g: float,
+    w_g: float,
+) -> tuple[NDArray[np.float64], int, int, float]:
+    """One Gauss–Newton linearisation of Eq. 7: ``out[:21]`` the upper triangle of ``JᵀWJ``, ``out[21:]``
+    ``JᵀWr``; returns (out, associated count, inlier count, summed Huber cost). See the module docstring."""
+    fx, fy, cx, cy = intrinsics[0], intrinsics[1], intrinsics[2], intrinsics[3]
+    height, width = geometry.shape[0], geometry.shape[1]
+    umax, vmax = width - 1.001, height - 1.001
+    out = np.zeros(27)
+    J = np.empty(6)
+    count = 0
+    inliers = 0
+    cost = 0.0
+    for i in range(points.shape[0]):
+        px, py, pz = points[i, 0], points[i, 1], points[i, 2]
+        qx = T[0, 0] * px + T[0, 1] * py + T[0, 2] * pz + T[0, 3]
+        qy = T[1, 0] * px + T[1, 1] * py + T[1, 2] * pz + T[1, 3]
+        qz = T[2, 0] * px + T[2, 1] * py + T[2, 2] * pz + T[2, 3]
+        if qz <= 1e-6:
+            continue
+        zi = 1.0 / qz
+        u = fx * qx * zi + cx
+        v = fy * qy * zi + cy
+        if not (u >= 0.0 and u <= umax and v >= 0.0 and v <= vmax):
+            continue
+        iu = int(u + 0.5)
+        iv = int(v + 0.5)
+        d_t = geometry[iv, iu, 0]
+        if not (d_t > 0.0) or abs(d_t - qz) > trunc:
+            continue
+        if use_depth and not np.isfinite(geometry[iv, iu, 4]):
+            continue
+        count += 1
+        inlier = True
+        if use_color:
+            u0 = int(u)
+            v0 = int(v)
+            a = u - u0
+            c = v - v0
+            w00 = (1.0 - a) * (1.0 - c)
+            w01 = a * (1.0 - c)
+            w10 = (1.0 - a) * c
+            w11 = a * c
+            s0 = (w00 * grey_grad[v0, u0, 0] + w01 * grey_grad[v0, u0 + 1, 0]
+                  + w10 * grey_grad[v0 + 1, u0, 0] + w11 * grey_grad[v0 + 1, u0 + 1, 0])
+            gu = (w00 * grey_grad[v0, u0, 1] + w01 * grey_grad[v0, u0 + 1, 1]
+                  + w10 * grey_grad[v0 + 1, u0, 1] + w11 * grey_grad[v0 + 1, u0 + 1, 1])
+            gv = (w00 * grey_grad[v0, u0, 2] + w01 * grey_grad[v0, u0 + 1, 2]
+                  + w10 * grey_grad[v0 + 1, u0, 2] + w11 * grey_grad[v0 + 1, u0 + 1, 2])
+            r = s0 - point_grey[i]
+            ga = gu * fx * zi
+            gc = gv * fy * zi
+            gd = -(ga * qx + gc * qy) * zi
+            J[0], J[1], J[2] = ga, gc, gd
+            J[3] = qy * gd - qz * gc
+            J[4] = qz * ga - qx * gd
+            J[5] = qx * gc - qy * ga
+            ar = abs(r)
+            if ar <= delta_c:
+                w = 1.0
+                cost += 0.5 * r * r
+            else:
+                w = delta_c / ar
+                cost += delta_c * (ar - 0.5 * delta_c)
+                inlier = False
+            k = 0
+            for m in range(6):
+                wj = w * J[m]
+                for n in range(m, 6):
+                    out[k] += wj * J[n]
+                    k += 1
+                out[21 + m] += wj * r
+        if use_depth:
+            nx, ny, nz = geometry[iv, iu, 4], geometry[iv, iu, 5], geometry[iv, iu, 6]
+            r = nx * (qx - geometry[iv, iu, 1]) + ny * (qy - geometry[iv, iu, 2]) + nz * (qz - geometry[iv, iu, 3])
+            J[0], J[1], J[2] = nx, ny, nz
+            J[3] = qy * nz - qz * ny
+            J[4] = qz * nx - qx * nz
+            J[5] = qx * ny - qy * nx
+            ar = abs(r)
+            if ar <= delta_g:
+                w = w_g
+                cost += w_g * 0.5 * r * r
+            else:
+                w = w_g * delta_g / ar
+                cost += w_g * delta_g * (ar - 0.5 * delta_g)
+                inlier = False
+            k = 0
+            for m in range(6):
+                wj = w * J[m]
+                for n in range(m, 6):
+                    out[k] += wj * J[n]
+                    k += 1
+                out[21 + m] += wj * r
+        if inlier:
+            inliers += 1
+    return out, count, inliers, cost
 
 
-def _sample(image: NDArray[np.float32], u: NDArray[np.float32], v: NDArray[np.float32], nearest: bool) -> NDArray:
-    """``image`` (H, W, C) at pixel positions ``(u, v)`` (N,), bilinear or nearest; 0 outside the image."""
-    n = len(u)
-    m = -(-n // _REMAP_COLS) * _REMAP_COLS
-    mu = np.zeros(m, dtype=np.float32)
-    mv = np.zeros(m, dtype=np.float32)
-    mu[:n] = u
-    mv[:n] = v
-    out = cv2.remap(
-        image,
-        mu.reshape(-1, _REMAP_COLS),
-        mv.reshape(-1, _REMAP_COLS),
-        cv2.INTER_NEAREST if nearest else cv2.INTER_LINEAR,
-        borderMode=cv2.BORDER_CONSTANT,
-        borderValue=0.0,
-    )
-    return out.reshape(m, image.shape[2])[:n]
-
-
-def _cross(a: NDArray[np.float32], b: NDArray[np.float32]) -> NDArray[np.float32]:
-    return np.stack(
-        [
-            a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1],
-            a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2],
-            a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0],
-        ],
-        axis=1,
-    )
-
-
-def _normal_equations(
-    J: NDArray[np.float32], w: NDArray[np.float32], r: NDArray[np.float32]
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Weighted Gauss–Newton blocks ``(Jᵀ W J, Jᵀ W r)``, accumulated in float64."""
-    J64 = J.astype(np.float64)
-    Jw = J64 * w.astype(np.float64)[:, None]
-    return Jw.T @ J64, Jw.T @ r.astype(np.float64)
+_TRIU = np.triu_indices(6)
 
 
 def _linearize(
     src: _Level, tgt: _Level, T: NDArray[np.float64], cfg: TrackingConfig, use_color: bool, use_depth: bool
 ) -> _Terms:
     cam = tgt.camera
-    q = src.points @ T[:3, :3].T.astype(np.float32) + T[:3, 3].astype(np.float32)
-    z = q[:, 2]
-    front = z > 1e-6
-    zi = np.float32(1.0) / np.where(front, z, np.float32(1.0))
-    u = cam.fx * q[:, 0] * zi + cam.cx
-    v = cam.fy * q[:, 1] * zi + cam.cy
-    keep = front & (u >= 0.0) & (u <= cam.width - 1.001) & (v >= 0.0) & (v <= cam.height - 1.001)
-    # projective association (nearest pixel) with an occlusion / outlier test on depth
-    geo = _sample(tgt.geometry, u, v, nearest=True)
-    keep &= (geo[:, 0] > 0) & (np.abs(geo[:, 0] - z) <= cfg.depth_outlier_trunc_m)
-    if use_depth:
-        keep &= np.isfinite(geo[:, 4])
-    sel = np.flatnonzero(keep)
+    intrinsics = np.array([cam.fx, cam.fy, cam.cx, cam.cy], dtype=np.float64)
+    out, count, inliers, cost = _accumulate(
+        src.points, src.point_grey, np.ascontiguousarray(T, dtype=np.float64), intrinsics, tgt.grey_grad,
+        tgt.geometry, use_color, use_depth, cfg.depth_outlier_trunc_m, cfg.intensity_huber_delta,
+        cfg.geometric_huber_delta_m, cfg.geometric_weight,
+    )
     H = np.zeros((6, 6))
-    b = np.zeros(6)
-    count = len(sel)
-    if count == 0:
-        return _Terms(H, b, 0, 0, 0.0)
-    q, u, v, zi, geo = q[sel], u[sel], v[sel], zi[sel], geo[sel]
-    inl = np.ones(count, dtype=bool)
-    cost = 0.0
-    if use_color:
-        s = _sample(tgt.grey_grad, u, v, nearest=False)
-        r = s[:, 0] - src.point_grey[sel]
-        a = s[:, 1] * np.float32(cam.fx) * zi
-        c = s[:, 2] * np.float32(cam.fy) * zi
-        d = -(a * q[:, 0] + c * q[:, 1]) * zi
-        grad = np.stack([a, c, d], axis=1)
-        J = np.concatenate([grad, _cross(q, grad)], axis=1)
-        Hc, bc = _normal_equations(J, _huber_weight(r, cfg.intensity_huber_delta), r)
-        H += Hc
-        b += bc
-        cost += float(np.sum(_huber(r, cfg.intensity_huber_delta), dtype=np.float64))
-        inl &= np.abs(r) <= cfg.intensity_huber_delta
-    if use_depth:
-        n = geo[:, 4:7]
-        r = np.einsum("ij,ij->i", n, q - geo[:, 1:4])
-        J = np.concatenate([n, _cross(q, n)], axis=1)
-        Hg, bg = _normal_equations(J, _huber_weight(r, cfg.geometric_huber_delta_m), r)
-        H += cfg.geometric_weight * Hg
-        b += cfg.geometric_weight * bg
-        cost += cfg.geometric_weight * float(np.sum(_huber(r, cfg.geometric_huber_delta_m), dtype=np.float64))
-        inl &= np.abs(r) <= cfg.geometric_huber_delta_m
-    return _Terms(H, b, count, int(np.count_nonzero(inl)), cost / count)
+    H[_TRIU] = out[:21]
+    H = H + np.triu(H, 1).T
+    return _Terms(H, out[21:].copy(), int(count), int(inliers), float(cost) / max(int(count), 1))
 
 
 def _align_pyramids(
-    src: list[_Level],
-    tgt: list[_Level],
+    src: tuple[_Level, ...],
+    tgt: tuple[_Level, ...],
     init: NDArray[np.float64],
     cfg: TrackingConfig,
     use_color: bool,
@@ -482,7 +575,32 @@ def align(
     init = _check_init(init_T_target_source)
     src = _prepare(source_rgb, source_depth_m, camera, cfg, "source")
     tgt = _prepare(target_rgb, target_depth_m, camera, cfg, "target")
-    return _align_pyramids(src, tgt, init, cfg, color, depth)
+    return _align_pyramids(src.levels, tgt.levels, init, cfg, color, depth)
+
+
+def align_frames(
+    source: RGBDFrame,
+    target: RGBDFrame,
+    *,
+    init_T_target_source: ArrayLike | None = None,
+    config: TrackingConfig | None = None,
+    use_color: bool | None = None,
+    use_depth: bool | None = None,
+) -> AlignResult:
+    """:func:`align` on frames prepared once by :func:`prepare_frame` (a live frame serves as the f2f source,
+    then as the f2f target of the next frame, and as the f2m source against the reference)."""
+    cfg = TrackingConfig() if config is None else config
+    color, depth = _resolve_terms(cfg, use_color, use_depth)
+    init = _check_init(init_T_target_source)
+    for role, frame in (("source", source), ("target", target)):
+        if (frame.pyramid_levels, frame.resolution_scale) != (cfg.pyramid_levels, cfg.resolution_scale):
+            raise TrackingError(
+                f"{role} frame was prepared with pyramid_levels={frame.pyramid_levels}, resolution_scale="
+                f"{frame.resolution_scale}; this alignment uses {cfg.pyramid_levels}, {cfg.resolution_scale}"
+            )
+    if source.camera != target.camera:
+        raise TrackingError(f"source and target cameras differ: {source.camera} vs {target.camera}")
+    return _align_pyramids(source.levels, target.levels, init, cfg, color, depth)
 
 
 def track_sequence(
@@ -502,12 +620,12 @@ def track_sequence(
     poses = []
     results: list[AlignResult] = []
     seconds: list[float] = []
-    prev: list[_Level] | None = None
+    prev: RGBDFrame | None = None
     for i, (rgb, depth_m) in enumerate(frames):
         t0 = time.perf_counter()
         cur = _prepare(rgb, depth_m, camera, cfg, f"frame {i}")
         if prev is not None:
-            res = _align_pyramids(cur, prev, np.eye(4), cfg, color, depth)
+            res = _align_pyramids(cur.levels, prev.levels, np.eye(4), cfg, color, depth)
             T_world = T_world @ res.T_target_source
             results.append(res)
             seconds.append(time.perf_counter() - t0)

@@ -3,7 +3,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-import yaml
 
 from lightfast.camera import PinholeCamera
 from lightfast.daylight.brightness import (
@@ -20,9 +19,6 @@ from lightfast.daylight.crf import CameraResponse
 from lightfast.daylight.lighting_map import LightingMapConfig, prepare_lighting_map
 from lightfast.daylight.sun import FREIBURG
 from lightfast.daylight.sun_update import sun_radiosity
-from lightfast.sim.daylight_recordings import _camera_yaml
-from lightfast.sim.gt_renderer import CameraResponse as SimCameraResponse
-from lightfast.sim.gt_renderer import DepthSensor
 from lightfast.sim.validation_rooms import box_room_with_window
 
 S_TRUE = np.array([[800.0, 760.0, 680.0],  # sun (per unit of B̂_sun)
@@ -51,14 +47,6 @@ def scene():
     T = look_at([2.25, 4.3, 1.6], [0.0, -2.8, -1.4])  # from the north wall towards the window and the sun patch
     camera = PinholeCamera(320, 240, 250.0, 250.0, 159.5, 119.5)
     return lmap, comps, T, camera
-
-
-@pytest.fixture(scope="module")
-def true_crf() -> CameraResponse:
-    """The simulator's true camera (sRGB + shoulder), through its camera.yaml."""
-    sim = SimCameraResponse(exposure_s=0.004)
-    doc = yaml.safe_load(_camera_yaml(sim, DepthSensor(), PinholeCamera(320, 240, 250.0, 250.0, 159.5, 119.5)))
-    return CameraResponse.from_dict(doc)
 
 
 def synth(ri: RadiosityImages, crf: CameraResponse, s: np.ndarray) -> np.ndarray:

@@ -135,3 +135,73 @@ def test_ate_rmse_is_invariant_to_rigid_alignment():
     assert 0.003 < ate_rmse(noisy, gt) < 0.02
     with pytest.raises(MetricsError):
         ate_rmse(est[:5], gt)
+
+
+def _reference_terms(src, tgt, T, cfg, use_color, use_depth):
+    """Eq. 7 normal equations written out with NumPy (independent of the fused kernel): nearest-pixel
+    association with the occlusion test, bilinear intensity/gradient, point-to-plane, Huber IRLS weights."""
+    cam = tgt.camera
+    q = src.points.astype(np.float64) @ T[:3, :3].T + T[:3, 3]
+    z = q[:, 2]
+    u = cam.fx * q[:, 0] / z + cam.cx
+    v = cam.fy * q[:, 1] / z + cam.cy
+    keep = (z > 1e-6) & (u >= 0) & (u <= cam.width - 1.001) & (v >= 0) & (v <= cam.height - 1.001)
+    iu, iv = np.floor(u[keep] + 0.5).astype(int), np.floor(v[keep] + 0.5).astype(int)
+    geo = tgt.geometry[iv, iu].astype(np.float64)
+    ok = (geo[:, 0] > 0) & (np.abs(geo[:, 0] - z[keep]) <= cfg.depth_outlier_trunc_m)
+    if use_depth:
+        ok &= np.isfinite(geo[:, 4])
+    idx = np.flatnonzero(keep)[ok]
+    q, u, v, geo = q[idx], u[idx], v[idx], geo[ok]
+    H, b = np.zeros((6, 6)), np.zeros(6)
+
+    def add(J, r, delta, weight):
+        w = weight * np.minimum(1.0, delta / np.maximum(np.abs(r), 1e-30))
+        H[...] += (J * w[:, None]).T @ J
+        b[...] += (J * w[:, None]).T @ r
+
+    if use_color:
+        u0, v0 = np.floor(u).astype(int), np.floor(v).astype(int)
+        a, c = (u - u0)[:, None], (v - v0)[:, None]
+        g = tgt.grey_grad.astype(np.float64)
+        s = (1 - a) * (1 - c) * g[v0, u0] + a * (1 - c) * g[v0, u0 + 1] + (1 - a) * c * g[v0 + 1, u0] \
+            + a * c * g[v0 + 1, u0 + 1]
+        r = s[:, 0] - src.point_grey[idx]
+        grad = np.stack([s[:, 1] * cam.fx / q[:, 2], s[:, 2] * cam.fy / q[:, 2], np.zeros(len(q))], axis=1)
+        grad[:, 2] = -(grad[:, 0] * q[:, 0] + grad[:, 1] * q[:, 1]) / q[:, 2]
+        add(np.concatenate([grad, np.cross(q, grad)], axis=1), r, cfg.intensity_huber_delta, 1.0)
+    if use_depth:
+        n = geo[:, 4:7]
+        r = np.einsum("ij,ij->i", n, q - geo[:, 1:4])
+        add(np.concatenate([n, np.cross(q, n)], axis=1), r, cfg.geometric_huber_delta_m, cfg.geometric_weight)
+    return H, b, len(idx)
+
+
+@needs_data
+@pytest.mark.parametrize("use_color,use_depth", [(True, True), (True, False), (False, True)])
+def test_fused_kernel_matches_numpy_normal_equations(scenes, use_color, use_depth):
+    from lightfast.tracking import prepare_frame
+    from lightfast.tracking.rgbd_odometry import _linearize
+
+    a, b = scenes.frame(0), scenes.frame(5)
+    src = prepare_frame(b.rgb, b.depth_mm / 1000.0, scenes.camera, config=FAST)
+    tgt = prepare_frame(a.rgb, a.depth_mm / 1000.0, scenes.camera, config=FAST)
+    T = se3_exp([0.01, -0.005, 0.008, 0.004, -0.006, 0.003])
+    for level in range(FAST.pyramid_levels):
+        terms = _linearize(src.levels[level], tgt.levels[level], T, FAST, use_color, use_depth)
+        H, g, count = _reference_terms(src.levels[level], tgt.levels[level], T, FAST, use_color, use_depth)
+        assert abs(terms.count - count) <= max(2, count // 2000)  # float32 vs float64 at the borders
+        np.testing.assert_allclose(terms.H, H, rtol=2e-3, atol=1e-6 * np.abs(H).max())
+        np.testing.assert_allclose(terms.b, g, rtol=5e-3, atol=2e-3 * np.abs(g).max())
+
+
+@needs_data
+def test_prepared_frames_must_match_the_alignment_config(scenes):
+    from lightfast.tracking import align_frames, prepare_frame
+
+    f = scenes.frame(0)
+    frame = prepare_frame(f.rgb, f.depth_mm / 1000.0, scenes.camera, config=FAST)
+    res = align_frames(frame, frame, config=FAST)
+    assert res.converged and np.allclose(res.T_target_source, np.eye(4), atol=1e-6)
+    with pytest.raises(TrackingError, match="pyramid_levels"):
+        align_frames(frame, frame, config=TrackingConfig())

@@ -1,0 +1,211 @@
+"""The relit reference of frame-to-model tracking: brightness scales per live frame and the adapted map rendered at
+the coarse pose (paper §III-C, Eq. 3–6, and §III-D, the reference images I_C^ref, I_D^ref of Eq. 7).
+
+:class:`DaylightRelighter` is the pipeline ``daylight_relight_node`` runs, one :meth:`~DaylightRelighter.step` per
+live frame at its coarse pose ``T≈`` (from frame-to-frame tracking):
+
+1. *rendering*: one Embree ray per pixel of the camera at ``T≈`` (a single batch); the hit triangles and barycentric
+   weights give the depth image and, at the pixel subset Ω (the ``stride_px`` grid), the normalized radiosity
+   images I_B̂x and the reflectance (:class:`~lightfast.daylight.brightness.RadiosityImages`);
+2. *estimation*: the scales ``s_x`` by E_crf (Eq. 4) or E_lin (Eq. 6), averaged over ``window`` frames
+   (:class:`~lightfast.daylight.brightness.BrightnessEstimator`);
+3. *shading*: the reference colour ``f(Δt · Σ_x s_x I_B̂x)`` of every pixel (Eq. 3 through the camera response).
+
+With ``reference = "reflectance"`` step 3 renders the reflectance map instead, scaled so that its mean grey value
+over the valid pixels matches the live image's — the ``refl-f2m`` baseline of §IV-C.
+
+B̂_sun comes from the chunk stream of ``sun_update_node`` (:class:`~lightfast.daylight.sun_update.SunEpochAssembler`
+swaps it in only when an epoch is complete); B̂_sky and B̂_grd from the lighting map.
+"""
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass, field
+from functools import lru_cache
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from lightfast.camera import PinholeCamera
+from lightfast.config import Config, param
+from lightfast.daylight.brightness import (
+    COMPONENTS,
+    MIN_REFLECTANCE,
+    BrightnessError,
+    BrightnessEstimator,
+    RadiosityImages,
+    _grid_rays,
+    _interpolate,
+    _pose,
+)
+from lightfast.daylight.crf import CameraResponse
+from lightfast.daylight.lighting_map import LightingMap
+
+__all__ = ["REFERENCE_KINDS", "DaylightRelighter", "Reference", "RelightConfig"]
+
+log = logging.getLogger(__name__)
+
+#: What the reference colour is rendered from: the relit map (proposed) or the reflectance map (refl-f2m).
+REFERENCE_KINDS = ("relit", "reflectance")
+_GREY = np.array([0.299, 0.587, 0.114])
+
+
+@dataclass(frozen=True)
+class RelightConfig(Config):
+    """Brightness estimation and reference rendering (paper §III-C, §III-D)."""
+
+    lighting_map: str = param("", description="Lighting map directory made by `lightfast daylight prepare`.",
+                              read_only=True)
+    crf_file: str = param("", description="Camera response + exposure YAML (`lightfast crf calibrate`, or a "
+                          "simulator's camera.yaml).", read_only=True)
+    reference: str = param("relit", description="Reference colour: the relit map (proposed) or the reflectance "
+                           "map scaled to the live mean brightness (refl-f2m baseline).", choices=REFERENCE_KINDS)
+    method: str = param("crf", description="Brightness error: E_crf (Eq. 4) or E_lin (Eq. 6).", choices=("crf", "lin"))
+    solver: str = param("trf", description="E_crf solver: bounded trust-region (s >= 0) or Levenberg-Marquardt.",
+                        choices=("trf", "lm"))
+    stride_px: int = param(15, description="Grid spacing of the pixel subset Omega, pixels.", min=1, max=200)
+    window: int = param(30, description="Frames in the moving average of the scales.", min=1, max=10_000)
+    min_reflectance: float = param(MIN_REFLECTANCE, description="Omega drops pixels with a smaller model "
+                                   "reflectance in any channel.", min=0.0, max=1.0)
+    min_pixels: int = param(10, description="Frames with fewer valid pixels in Omega do not update the scales.",
+                            min=1)
+
+
+@dataclass(frozen=True, eq=False)
+class Reference:
+    """The reference images of one live frame, rendered at ``T_map_cam`` (the coarse pose ``T≈``).
+
+    ``color`` (H, W, 3) uint8 (0 where nothing was hit), ``depth_m`` (H, W) float32 z-depth (0 = no geometry),
+    ``scales`` (K, 3) the averaged brightness scales used (rows :attr:`names`), ``frame_scales`` the single-frame
+    estimate (None when the frame was not used), ``seconds`` the stage timings (render, estimate, shade).
+    """
+
+    stamp_ns: int
+    T_map_cam: NDArray[np.float64]
+    color: NDArray[np.uint8]
+    depth_m: NDArray[np.float32]
+    names: tuple[str, ...]
+    scales: NDArray[np.float64]
+    frame_scales: NDArray[np.float64] | None
+    num_pixels: int
+    seconds: dict[str, float] = field(default_factory=dict)
+
+    def scale(self, name: str) -> NDArray[np.float64]:
+        return self.scales[self.names.index(name)]
+
+
+@lru_cache(maxsize=8)
+def _grid_index(camera: PinholeCamera, stride_px: int) -> NDArray[np.int64]:
+    """Row-major indices of the Ω grid pixels among all pixels of ``camera``."""
+    uv, _ = _grid_rays(camera, stride_px)
+    idx = uv[:, 1] * camera.width + uv[:, 0]
+    idx.setflags(write=False)
+    return idx
+
+
+class DaylightRelighter:
+    """Brightness estimation and reference rendering for one camera and lighting map; see the module docstring.
+
+    ``crf`` is the camera response with the exposure of the live camera. B̂_sun is ``None`` until
+    :meth:`set_sun_radiosity` is called; :meth:`step` raises :class:`BrightnessError` until then.
+    """
+
+    def __init__(self, lmap: LightingMap, crf: CameraResponse, *, config: RelightConfig | None = None) -> None:
+        self.lmap = lmap
+        self.crf = crf
+        self.config = RelightConfig() if config is None else config
+        self.names = COMPONENTS
+        V = lmap.num_vertices
+        # (V, K*3) per-vertex B̂ of all components, sun first; the sun columns are filled by set_sun_radiosity
+        self._stack = np.zeros((V, len(self.names) * 3), dtype=np.float32)
+        self._stack[:, 3:6] = lmap.sky_radiosity
+        self._stack[:, 6:9] = lmap.ground_radiosity
+        self._faces = np.ascontiguousarray(np.asarray(lmap.mesh.faces), dtype=np.int64)
+        self._reflectance = np.asarray(lmap.mesh.reflectance, dtype=np.float32)
+        self.sun_epoch_ns: int | None = None
+        self.estimator = self._make_estimator()
+
+    def _make_estimator(self) -> BrightnessEstimator:
+        cfg = self.config
+        return BrightnessEstimator(self.crf, names=self.names, window=cfg.window, method=cfg.method,  # type: ignore[arg-type]
+                                   solver=cfg.solver, min_pixels=cfg.min_pixels)  # type: ignore[arg-type]
+
+    def reconfigure(self, config: RelightConfig) -> None:
+        """Apply new options; the scale average restarts if the estimation options changed."""
+        old, self.config = self.config, config
+        if (old.method, old.solver, old.window, old.min_pixels) != (config.method, config.solver, config.window,
+                                                                     config.min_pixels):
+            self.estimator = self._make_estimator()
+
+    @property
+    def ready(self) -> bool:
+        """B̂_sun has been set: references can be rendered."""
+        return self.sun_epoch_ns is not None
+
+    def set_sun_radiosity(self, sun_radiosity: ArrayLike, epoch_ns: int) -> None:
+        """Swap in a complete B̂_sun (V, 3) for the sun time ``epoch_ns``."""
+        b = np.asarray(sun_radiosity, dtype=np.float32)
+        if b.shape != (self.lmap.num_vertices, 3) or not np.all(np.isfinite(b)):
+            raise BrightnessError(f"B̂_sun must be finite with shape ({self.lmap.num_vertices}, 3), got {b.shape}")
+        self._stack[:, 0:3] = b
+        self.sun_epoch_ns = int(epoch_ns)
+
+    def step(self, stamp_ns: int, rgb: ArrayLike, T_map_cam: ArrayLike, camera: PinholeCamera) -> Reference:
+        """Estimate the scales from the live colour image ``rgb`` (H, W, 3 uint8) at the coarse pose and render the
+        reference colour and depth there."""
+        if not self.ready:
+            raise BrightnessError("no complete B̂_sun yet (waiting for the first sun update epoch)")
+        img = np.asarray(rgb)
+        if img.shape != (camera.height, camera.width, 3):
+            raise BrightnessError(f"live image shape {img.shape} does not match the camera "
+                                  f"({camera.height}, {camera.width}, 3)")
+        if img.dtype != np.uint8:
+            raise BrightnessError(f"live image must be uint8 RGB, got {img.dtype}")
+        R, t = _pose(T_map_cam)
+        cfg = self.config
+        t0 = time.perf_counter()
+        _, d_cam = _grid_rays(camera, 1)
+        hits = self.lmap.caster.intersect(t, d_cam @ R.T)
+        hit = hits.hit
+        tri = np.take(self._faces, np.maximum(hits.triangle_id, 0), axis=0)
+        corners = (tri[:, 0], tri[:, 1], tri[:, 2])
+        bu = np.nan_to_num(hits.barycentric_uv, nan=0.0)
+        w = np.empty((len(hit), 3), dtype=np.float32)
+        w[:, 1], w[:, 2] = bu[:, 0], bu[:, 1]
+        w[:, 0] = np.where(hit, 1.0 - bu[:, 0] - bu[:, 1], 0.0)
+        depth = np.where(hit, hits.distance_m * d_cam[:, 2].astype(np.float32), 0.0).astype(np.float32)
+        # Ω: the grid subset of the same cast
+        g = _grid_index(camera, cfg.stride_px)
+        gc = (corners[0][g], corners[1][g], corners[2][g])
+        comp = _interpolate(self._stack, gc, w[g])  # (N, K*3)
+        rho = _interpolate(self._reflectance, gc, w[g])
+        valid = hit[g] & np.all(rho >= cfg.min_reflectance, axis=1)
+        images = RadiosityImages(_grid_rays(camera, cfg.stride_px)[0],
+                                 {n: comp[:, 3 * k: 3 * k + 3] for k, n in enumerate(self.names)}, rho, valid,
+                                 depth[g])
+        t1 = time.perf_counter()
+        scales = self.estimator.update(img, images)
+        fit = self.estimator.last_fit
+        frame_scales = fit.scales.copy() if fit is not None and fit.num_pixels >= cfg.min_pixels else None
+        t2 = time.perf_counter()
+        h, wd = camera.height, camera.width
+        if cfg.reference == "relit":
+            per_vertex = self._stack.reshape(-1, len(self.names), 3)
+            radiosity_v = np.einsum("vkc,kc->vc", per_vertex, scales.astype(np.float32))
+            color = self.crf.apply_radiosity(_interpolate(radiosity_v, corners, w))
+        else:
+            refl = _interpolate(self._reflectance, corners, w).astype(np.float64)
+            live = img.reshape(-1, 3).astype(np.float64)
+            m_ref = float(np.mean(refl[hit] @ _GREY)) if hit.any() else 0.0
+            m_live = float(np.mean(live[hit] @ _GREY)) if hit.any() else 0.0
+            color = refl * (m_live / m_ref if m_ref > 0 else 0.0)
+        color[~hit] = 0.0
+        color8 = np.clip(np.rint(color), 0, 255).astype(np.uint8).reshape(h, wd, 3)
+        t3 = time.perf_counter()
+        return Reference(
+            stamp_ns=int(stamp_ns), T_map_cam=np.asarray(T_map_cam, dtype=np.float64).copy(), color=color8,
+            depth_m=depth.reshape(h, wd), names=self.names, scales=scales, frame_scales=frame_scales,
+            num_pixels=int(np.count_nonzero(valid)),
+            seconds={"render": t1 - t0 + (t3 - t2), "estimate": t2 - t1, "cast": t1 - t0, "shade": t3 - t2},
+        )

@@ -1,0 +1,378 @@
+"""The tracking evaluation of paper §IV-C (Table I): the two-step tracker and its ablations on daylight recordings.
+
+For each recording made by ``lightfast sim daylight`` (DS1.T1–T6, DS2.T1–T6) and each method, the tracker runs
+in-process over every frame — f2f (:class:`~lightfast.tracking.pipeline.RGBDTracker`), the relit reference at T≈
+(:class:`~lightfast.daylight.relight.DaylightRelighter`), f2m — exactly the work the three nodes split between them.
+The method sees the bag's colour and depth images, ``camera_info``, the lighting map, the camera response file and
+the site; ground truth is read only here, by the protocol:
+
+* the tracker starts at the ground-truth pose of the first frame;
+* a frame whose estimate deviates from ground truth by more than 10 cm or 10° is a *tracking loss*: it is excluded
+  from the RMSE and the tracker is reset to the ground-truth pose of that frame;
+* RMSE is the root mean square translation error of the remaining frames (the map frame is the ground-truth frame,
+  so no trajectory alignment is applied).
+
+Methods: ``proposed`` (E_crf), ``proposed-lin`` (the same with E_lin, Eq. 6 — the paper's E_crf vs E_lin remark),
+``refl-f2m``, ``depth-only``, ``no-color-f2m``. B̂_sun is computed once per recording for its middle time (the
+recordings last 20 s; the sun moves 0.08° in that time).
+"""
+from __future__ import annotations
+
+import csv
+import dataclasses
+import datetime as dt
+import json
+import logging
+import math
+import time
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from lightfast.bag.reader import open_bag
+from lightfast.camera import PinholeCamera
+from lightfast.daylight.crf import load_crf
+from lightfast.daylight.lighting_map import LightingMap
+from lightfast.daylight.relight import DaylightRelighter, RelightConfig
+from lightfast.daylight.sun import sun_position
+from lightfast.daylight.sun_update import sun_radiosity
+from lightfast.errors import LightfastError
+from lightfast.geometry import rotation_angle_deg
+from lightfast.io import write_text_atomic
+from lightfast.progress import track
+from lightfast.topics import COLOR_INFO_TOPIC, COLOR_TOPIC, DEPTH_TOPIC, GT_POSE_TOPIC
+from lightfast.tracking.pipeline import RGBDTracker, TrackerConfig
+
+__all__ = ["METHODS", "EvalError", "FrameRecord", "SequenceRun", "evaluate_daylight", "run_sequence"]
+
+log = logging.getLogger(__name__)
+
+#: method name → (tracker mode, reference kind, brightness error)
+METHODS: dict[str, tuple[str, str, str]] = {
+    "proposed": ("proposed", "relit", "crf"),
+    "proposed-lin": ("proposed", "relit", "lin"),
+    "refl-f2m": ("refl-f2m", "reflectance", "crf"),
+    "depth-only": ("depth-only", "relit", "crf"),
+    "no-color-f2m": ("no-color-f2m", "relit", "crf"),
+}
+LOSS_TRANSLATION_M = 0.10
+LOSS_ROTATION_DEG = 10.0
+
+
+class EvalError(LightfastError):
+    """An evaluation input is missing or inconsistent (recording directory, lighting map, method name)."""
+
+
+@dataclass(frozen=True)
+class FrameRecord:
+    stamp_ns: int
+    t_err_m: float
+    r_err_deg: float
+    lost: bool
+    source: str
+    scale_sun: tuple[float, float, float]
+    scale_sky: tuple[float, float, float]
+    scale_ground: tuple[float, float, float]
+    ms_f2f: float
+    ms_render: float
+    ms_estimate: float
+    ms_f2m: float
+
+
+@dataclass
+class SequenceRun:
+    sequence: str
+    method: str
+    frames: list[FrameRecord] = field(default_factory=list)
+    T_est: list[NDArray[np.float64]] = field(default_factory=list)
+    T_gt: list[NDArray[np.float64]] = field(default_factory=list)
+
+    @property
+    def losses(self) -> int:
+        return sum(f.lost for f in self.frames)
+
+    @property
+    def loss_ratio(self) -> float:
+        return self.losses / max(len(self.frames), 1)
+
+    @property
+    def rmse_m(self) -> float:
+        e = np.array([f.t_err_m for f in self.frames if not f.lost])
+        return float(np.sqrt(np.mean(e**2))) if len(e) else math.nan
+
+
+def _frames(bag_dir: Path) -> Iterator[tuple[int, NDArray[np.uint8], NDArray[np.float32], PinholeCamera,
+                                              NDArray[np.float64]]]:
+    """(stamp, rgb, depth_m, camera, T_gt) per frame, paired by exact stamp."""
+    from lightfast.ros.convert import camera_from_camera_info, image_to_numpy, pose_stamped_to_matrix
+
+    parts: dict[int, dict[str, object]] = {}
+    need = (COLOR_TOPIC, DEPTH_TOPIC, COLOR_INFO_TOPIC, GT_POSE_TOPIC)
+    with open_bag(bag_dir) as bag:
+        for m in bag.messages(need):
+            msg = bag.deserialize(m)
+            stamp = int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
+            p = parts.setdefault(stamp, {})
+            if m.topic == COLOR_TOPIC:
+                p["rgb"] = image_to_numpy(msg)
+            elif m.topic == DEPTH_TOPIC:
+                d = image_to_numpy(msg)
+                p["depth"] = d.astype(np.float32) / 1000.0 if d.dtype == np.uint16 else d.astype(np.float32)
+            elif m.topic == COLOR_INFO_TOPIC:
+                p["camera"] = camera_from_camera_info(msg)
+            else:
+                p["gt"] = pose_stamped_to_matrix(msg)[0]
+            if len(p) == 4:
+                del parts[stamp]
+                yield stamp, p["rgb"], p["depth"], p["camera"], p["gt"]  # type: ignore[misc]
+
+
+def _sequence_files(seq_dir: Path) -> dict[str, Path]:
+    files = {"bag": seq_dir / "bag", "crf": seq_dir / "camera.yaml", "info": seq_dir / "sequence.json"}
+    missing = [str(p) for p in files.values() if not p.exists()]
+    if missing:
+        raise EvalError(f"{seq_dir} is not a complete daylight recording (missing {', '.join(missing)}); "
+                        f"make it with `lightfast sim daylight`")
+    return files
+
+
+def sequence_sun_radiosity(seq_dir: Path, lmap: LightingMap) -> NDArray[np.float32]:
+    """B̂_sun for the middle of a recording (from its ``sequence.json`` start time, frame count and rate)."""
+    info = json.loads(_sequence_files(seq_dir)["info"].read_text())
+    start = dt.datetime.fromisoformat(info["start_utc"])
+    mid_ns = int(start.timestamp() * 1e9) + int(0.5 * info["frames"] / float(info["rate_hz"]) * 1e9)
+    return sun_radiosity(lmap, sun_position(lmap.site, mid_ns).direction_map)
+
+
+def run_sequence(seq_dir: Path, lmap: LightingMap, method: str, *, max_frames: int | None = None,
+                 progress: bool = True, sun_B: NDArray[np.float32] | None = None,
+                 tracker_config: TrackerConfig | None = None) -> SequenceRun:
+    """Run one method over one recording with the §IV-C protocol (see the module docstring)."""
+    if method not in METHODS:
+        raise EvalError(f"unknown method {method!r}; choose from {', '.join(METHODS)}")
+    files = _sequence_files(seq_dir)
+    mode, reference, brightness = METHODS[method]
+    info = json.loads(files["info"].read_text())
+    frames_total = int(info["frames"])
+    crf = load_crf(files["crf"])
+    relighter = DaylightRelighter(lmap, crf, config=RelightConfig(reference=reference, method=brightness))
+    tracker_cfg = dataclasses.replace(tracker_config or TrackerConfig(), mode=mode)
+    run = SequenceRun(seq_dir.name, method)
+    tracker: RGBDTracker | None = None
+    n = frames_total if max_frames is None else min(frames_total, max_frames)
+    it = _frames(files["bag"])
+    for i, (stamp, rgb, depth_m, camera, T_gt) in track(enumerate(it), desc=f"{seq_dir.name} {method}", total=n,
+                                                        enabled=progress, unit="frame"):
+        if i >= n:
+            break
+        if tracker is None:
+            tracker = RGBDTracker(camera, config=tracker_cfg)
+            tracker.reset(T_gt)
+            if sun_B is None:
+                sun_B = sequence_sun_radiosity(seq_dir, lmap)
+            relighter.set_sun_radiosity(sun_B, stamp)
+        coarse = tracker.track_coarse(stamp, rgb, depth_m)
+        ref = relighter.step(stamp, rgb, coarse.T_map_cam, camera)
+        res = tracker.refine(stamp, ref.color, ref.depth_m)
+        E = np.linalg.solve(T_gt, res.T_map_cam)
+        t_err = float(np.linalg.norm(E[:3, 3]))
+        r_err = float(rotation_angle_deg(E[:3, :3]))
+        lost = t_err > LOSS_TRANSLATION_M or r_err > LOSS_ROTATION_DEG
+        if lost:
+            tracker.reset(T_gt, stamp_ns=stamp)
+        s = {n_: tuple(float(v) for v in ref.scale(n_)) for n_ in ref.names}
+        run.frames.append(FrameRecord(
+            stamp, t_err, r_err, lost, res.source, s["sun"], s["sky"], s["ground"],  # type: ignore[arg-type]
+            1e3 * res.seconds.get("f2f", 0.0), 1e3 * ref.seconds["render"], 1e3 * ref.seconds["estimate"],
+            1e3 * res.seconds.get("f2m", 0.0)))
+        run.T_est.append(res.T_map_cam)
+        run.T_gt.append(T_gt)
+    if not run.frames:
+        raise EvalError(f"{seq_dir}: no complete frames (colour + depth + camera_info + ground truth) in the bag")
+    return run
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# the whole evaluation
+
+
+def _lighting_map(scene: str, sim_dir: Path, maps_dir: Path, progress: bool) -> LightingMap:
+    """The scene's lighting map, prepared once into ``maps_dir/<scene>`` (reused while the mesh is unchanged)."""
+    from lightfast.daylight.lighting_map import LightingMapConfig, prepare_lighting_map
+    from lightfast.daylight.mesh import load_ply
+    from lightfast.daylight.sun import Site
+
+    out = maps_dir / scene
+    mesh_path, site_path = sim_dir / "scenes" / f"{scene}.ply", sim_dir / "scenes" / f"{scene}.site.yaml"
+    if out.exists():
+        return LightingMap.load(out)
+    log.info("preparing the lighting map of %s into %s", scene, out)
+    lmap = prepare_lighting_map(load_ply(mesh_path), Site.from_yaml(site_path), LightingMapConfig(),
+                                progress=progress)
+    lmap.save(out)
+    return lmap
+
+
+def _write_csv(path: Path, runs: Sequence[SequenceRun]) -> None:
+    import io
+
+    buf = io.StringIO()
+    names = [f.name for f in FrameRecord.__dataclass_fields__.values()]
+    w = csv.writer(buf)
+    w.writerow(["sequence", "method", "frame", *names])
+    for run in runs:
+        for i, f in enumerate(run.frames):
+            row = asdict(f)
+            w.writerow([run.sequence, run.method, i, *[
+                " ".join(f"{v:.6g}" for v in row[k]) if isinstance(row[k], tuple) else row[k] for k in names]])
+    write_text_atomic(path, buf.getvalue())
+
+
+def table_markdown(runs: Sequence[SequenceRun], methods: Sequence[str]) -> str:
+    seqs = sorted({r.sequence for r in runs})
+    by = {(r.sequence, r.method): r for r in runs}
+    lines = ["| sequence | " + " | ".join(methods) + " |", "|---|" + "---|" * len(methods)]
+    for s in seqs:
+        cells = []
+        for m in methods:
+            r = by.get((s, m))
+            cells.append("—" if r is None else f"{r.rmse_m:.4f} m / {100 * r.loss_ratio:.2f} %")
+        lines.append(f"| {s} | " + " | ".join(cells) + " |")
+    avg = []
+    for m in methods:
+        rs = [by[(s, m)] for s in seqs if (s, m) in by]
+        avg.append("—" if not rs else f"**{np.nanmean([r.rmse_m for r in rs]):.4f} m / "
+                   f"{100 * np.mean([r.loss_ratio for r in rs]):.2f} %**")
+    lines.append("| **average** | " + " | ".join(avg) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def _plots(out: Path, runs: Sequence[SequenceRun], sim_dir: Path) -> list[Path]:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    written = []
+    seqs = sorted({r.sequence for r in runs})
+    methods = list(dict.fromkeys(r.method for r in runs))
+    by = {(r.sequence, r.method): r for r in runs}
+    # per-frame translation error and trajectories
+    fig, axes = plt.subplots(len(seqs), 2, figsize=(12, 2.6 * len(seqs)), squeeze=False)
+    for row, s in enumerate(seqs):
+        for m in methods:
+            r = by.get((s, m))
+            if r is None:
+                continue
+            e = np.array([f.t_err_m for f in r.frames])
+            axes[row, 0].plot(100 * e, lw=0.8, label=m)
+            T = np.array(r.T_est)
+            axes[row, 1].plot(T[:, 0, 3], T[:, 1, 3], lw=0.8, label=m)
+        gt = np.array(next(by[(s, m)] for m in methods if (s, m) in by).T_gt)
+        axes[row, 1].plot(gt[:, 0, 3], gt[:, 1, 3], "k--", lw=1.0, label="ground truth")
+        axes[row, 0].set_ylabel(f"{s}\nerror [cm]")
+        axes[row, 0].axhline(100 * LOSS_TRANSLATION_M, color="r", lw=0.5)
+        axes[row, 1].set_aspect("equal", adjustable="datalim")
+    axes[0, 0].legend(fontsize=7, ncol=3)
+    axes[0, 1].legend(fontsize=7)
+    axes[-1, 0].set_xlabel("frame")
+    axes[-1, 1].set_xlabel("x [m] (top view)")
+    fig.tight_layout()
+    p = out / "daylight_tracking.png"
+    fig.savefig(p, dpi=80)
+    plt.close(fig)
+    written.append(p)
+    # estimated vs true brightness (proposed) for the cloudy sequences and one clear one
+    shown = [s for s in seqs if s.endswith("T6")] + [s for s in seqs if s.endswith("T1")]
+    if shown and any((s, "proposed") in by for s in shown):
+        fig, axes = plt.subplots(len(shown), 1, figsize=(9, 2.8 * len(shown)), squeeze=False)
+        for ax, s in zip(axes[:, 0], shown, strict=True):
+            r = by.get((s, "proposed"))
+            if r is None:
+                continue
+            true = _true_sun(sim_dir / s)
+            est = np.array([f.scale_sun[1] for f in r.frames])
+            n = min(len(est), len(true))
+            k = float(np.dot(est[:n], true[:n]) / max(np.dot(true[:n], true[:n]), 1e-30))
+            ax.plot(est[:n], label="estimated s_sun (G, 30-frame average)")
+            ax.plot(k * true[:n], "--", label=f"true sun irradiance (G) x {k:.3g}")
+            ax.set_ylabel(s)
+            ax.legend(fontsize=7)
+        axes[-1, 0].set_xlabel("frame")
+        fig.tight_layout()
+        p = out / "daylight_brightness.png"
+        fig.savefig(p, dpi=80)
+        plt.close(fig)
+        written.append(p)
+    return written
+
+
+def _true_sun(seq_dir: Path) -> NDArray[np.float64]:
+    with open(seq_dir / "truth.csv") as fh:
+        return np.array([float(row["sun_g"]) for row in csv.DictReader(fh)])
+
+
+def brightness_correlation(run: SequenceRun, seq_dir: Path) -> float:
+    """Pearson correlation of the estimated sun scale (G) with the simulator's sun irradiance over the run."""
+    true = _true_sun(seq_dir)
+    est = np.array([f.scale_sun[1] for f in run.frames])
+    n = min(len(est), len(true))
+    if n < 3 or np.std(true[:n]) == 0 or np.std(est[:n]) == 0:
+        return math.nan
+    return float(np.corrcoef(est[:n], true[:n])[0, 1])
+
+
+def evaluate_daylight(sim_dir: Path, out_dir: Path, *, methods: Sequence[str] = tuple(METHODS),
+                      sequences: Sequence[str] | None = None, maps_dir: Path | None = None,
+                      max_frames: int | None = None, progress: bool = True,
+                      on_run: Callable[[SequenceRun], None] | None = None) -> list[SequenceRun]:
+    """Run ``methods`` over the recordings in ``sim_dir`` and write ``daylight_table.md``, ``daylight_frames.csv``,
+    ``daylight_summary.json`` and PNG plots into ``out_dir``."""
+    for m in methods:
+        if m not in METHODS:
+            raise EvalError(f"unknown method {m!r}; choose from {', '.join(METHODS)}")
+    seq_dirs = sorted(p for p in sim_dir.iterdir() if (p / "sequence.json").exists()) if sim_dir.is_dir() else []
+    if sequences:
+        wanted = set(sequences)
+        seq_dirs = [p for p in seq_dirs if p.name in wanted]
+        missing = wanted - {p.name for p in seq_dirs}
+        if missing:
+            raise EvalError(f"recordings not found in {sim_dir}: {', '.join(sorted(missing))}")
+    if not seq_dirs:
+        raise EvalError(f"no recordings in {sim_dir} (make them with `lightfast sim daylight {sim_dir}`)")
+    maps_dir = maps_dir or sim_dir / "maps"
+    out_dir.mkdir(parents=True, exist_ok=True)
+    runs: list[SequenceRun] = []
+    maps: dict[str, LightingMap] = {}
+    t0 = time.perf_counter()
+    for seq in seq_dirs:
+        scene = json.loads((seq / "sequence.json").read_text())["sequence"]["scene"]
+        if scene not in maps:
+            maps.clear()  # one scene's map in memory at a time
+            maps[scene] = _lighting_map(scene, sim_dir, maps_dir, progress)
+        lmap = maps[scene]
+        sun_B = sequence_sun_radiosity(seq, lmap)
+        for m in methods:
+            run = run_sequence(seq, lmap, m, max_frames=max_frames, progress=progress, sun_B=sun_B)
+            runs.append(run)
+            if on_run is not None:
+                on_run(run)
+    methods = list(methods)
+    summary = {
+        "methods": methods,
+        "sequences": [p.name for p in seq_dirs],
+        "seconds": time.perf_counter() - t0,
+        "runs": [{"sequence": r.sequence, "method": r.method, "frames": len(r.frames), "rmse_m": r.rmse_m,
+                  "loss_ratio": r.loss_ratio,
+                  "brightness_correlation": brightness_correlation(r, sim_dir / r.sequence),
+                  "median_ms": {k: float(np.median([getattr(f, f"ms_{k}") for f in r.frames]))
+                                for k in ("f2f", "render", "estimate", "f2m")}} for r in runs],
+    }
+    write_text_atomic(out_dir / "daylight_table.md", table_markdown(runs, methods))
+    _write_csv(out_dir / "daylight_frames.csv", runs)
+    write_text_atomic(out_dir / "daylight_summary.json", json.dumps(summary, indent=1) + "\n")
+    _plots(out_dir, runs, sim_dir)
+    return runs

@@ -1,0 +1,231 @@
+"""The two-step camera tracking of paper §III-D: frame-to-frame, then frame-to-model against the relit reference.
+
+:class:`RGBDTracker` is the pipeline ``rgbd_tracker_node`` runs. Per live frame:
+
+1. :meth:`~RGBDTracker.track_coarse` — f2f: Eq. 7 against the previous frame, started at identity, gives the
+   relative motion and the coarse pose ``T≈ = T_map_prev · T_prev_cur`` (published for the relight step, which
+   renders the reference there);
+2. :meth:`~RGBDTracker.refine` — f2m: Eq. 7 of the live frame against the reference colour + depth rendered at
+   ``T≈``, started at identity, gives ``T_ref_cur`` and the final pose ``T = T≈ · T_ref_cur``;
+   or :meth:`~RGBDTracker.skip_reference` when no reference comes (the f2f pose is final).
+
+The steps may interleave: frame k+1 can be coarse-tracked before frame k's reference arrives (a pipelined node).
+Each pending frame remembers its predecessor and relative motion, so when frame k is refined, the best-known poses
+of the frames after it are re-chained from the refined pose.
+
+Modes (the ablation of §IV-C): ``proposed`` and ``refl-f2m`` use E_C + w_G E_G in both steps (they differ in the
+reference the relight step renders), ``depth-only`` uses E_G alone in both, ``no-color-f2m`` E_C + E_G in f2f and
+E_G alone in f2m.
+"""
+from __future__ import annotations
+
+import logging
+import time
+from collections import OrderedDict
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from lightfast.camera import PinholeCamera
+from lightfast.config import ConfigError, param
+from lightfast.geometry import make_transform, quat_to_matrix, rotation_angle_deg
+from lightfast.tracking.rgbd_odometry import (
+    AlignResult,
+    RGBDFrame,
+    TrackingConfig,
+    TrackingError,
+    align_frames,
+    prepare_frame,
+)
+
+__all__ = ["CoarseEstimate", "RGBDTracker", "TrackResult", "TrackerConfig"]
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class TrackerConfig(TrackingConfig):
+    """Options of the two-step tracker (``rgbd_tracker_node``): the Eq. 7 options plus the f2m acceptance."""
+
+    initial_pose: tuple[float, ...] = param(
+        (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0),
+        description="Start pose T_map_cam as x y z (m) qx qy qz qw; /tracker/reset overrides it.",
+    )
+    reference_timeout_s: float = param(0.5, description="A frame whose reference has not arrived after this "
+                                       "long (wall time) is finished with its f2f pose.", min=0.0, max=60.0)
+    max_pending: int = param(4, description="Frames kept waiting for their reference; older ones are finished "
+                             "with the f2f pose.", min=1, max=100)
+    max_f2m_correction_m: float = param(0.10, description="An f2m correction of T≈ larger than this is rejected "
+                                        "(the f2f pose is kept), metres.", min=0.0)
+    max_f2m_correction_deg: float = param(10.0, description="An f2m rotation correction larger than this is "
+                                          "rejected, degrees.", min=0.0)
+
+    def check(self) -> None:
+        super().check()
+        if len(self.initial_pose) != 7:
+            raise ConfigError(f"initial_pose needs 7 numbers (x y z qx qy qz qw), got {len(self.initial_pose)}")
+        if abs(float(np.linalg.norm(self.initial_pose[3:])) - 1.0) > 1e-3:
+            raise ConfigError(f"initial_pose quaternion must be unit length, got {self.initial_pose[3:]}")
+
+    @property
+    def T_map_cam_initial(self) -> NDArray[np.float64]:
+        return make_transform(quat_to_matrix(self.initial_pose[3:]), self.initial_pose[:3])
+
+    @property
+    def f2f_color(self) -> bool:
+        return self.mode != "depth-only"
+
+    @property
+    def f2m_color(self) -> bool:
+        return self.mode in ("proposed", "refl-f2m")
+
+
+@dataclass(frozen=True, eq=False)
+class CoarseEstimate:
+    """Result of f2f tracking for one frame: ``T_map_cam`` is T≈ (where the reference is to be rendered)."""
+
+    stamp_ns: int
+    T_map_cam: NDArray[np.float64]
+    f2f: AlignResult | None  # None for the first frame after a reset
+    seconds: float
+
+
+@dataclass(frozen=True, eq=False)
+class TrackResult:
+    """The final pose of one frame. ``source``: ``"f2m"`` (refined against the reference), ``"f2f"`` (no reference,
+    or the f2m result was rejected — see ``reason``) or ``"reset"``."""
+
+    stamp_ns: int
+    T_map_cam: NDArray[np.float64]
+    source: str
+    reason: str
+    f2f: AlignResult | None
+    f2m: AlignResult | None
+    seconds: dict[str, float] = field(default_factory=dict)
+
+
+@dataclass
+class _Pending:
+    frame: RGBDFrame
+    T_coarse: NDArray[np.float64]  # T≈ as published (the reference is rendered there)
+    T_best: NDArray[np.float64]  # best-known pose, re-chained when a predecessor is refined
+    prev_stamp: int | None
+    T_prev_cur: NDArray[np.float64]
+    f2f: AlignResult | None
+    f2f_seconds: float
+
+
+class RGBDTracker:
+    """Two-step RGB-D tracking for one camera; see the module docstring. Call :meth:`reset` with the start pose."""
+
+    def __init__(self, camera: PinholeCamera, *, config: TrackerConfig | None = None) -> None:
+        self.camera = camera
+        self.config = TrackerConfig() if config is None else config
+        self._pending: OrderedDict[int, _Pending] = OrderedDict()
+        self._last: tuple[int, RGBDFrame, NDArray[np.float64]] | None = None  # stamp, frame, best pose
+        self._T_start: NDArray[np.float64] | None = None
+
+    @property
+    def initialized(self) -> bool:
+        return self._T_start is not None or self._last is not None
+
+    @property
+    def pending_stamps(self) -> list[int]:
+        return list(self._pending)
+
+    def reset(self, T_map_cam: ArrayLike, *, stamp_ns: int | None = None) -> None:
+        """Restart tracking at pose ``T_map_cam``: of the frame ``stamp_ns`` if it was already coarse-tracked (the
+        evaluation's reset to ground truth after a tracking loss), else of the next frame."""
+        T = np.asarray(T_map_cam, dtype=np.float64)
+        if T.shape != (4, 4) or not np.all(np.isfinite(T)):
+            raise TrackingError(f"reset pose must be a finite 4x4 matrix, got shape {T.shape}")
+        self._pending.clear()
+        if stamp_ns is not None and self._last is not None and self._last[0] == int(stamp_ns):
+            self._last = (self._last[0], self._last[1], T.copy())
+            self._T_start = None
+        else:
+            self._last = None
+            self._T_start = T.copy()
+
+    def track_coarse(self, stamp_ns: int, rgb: ArrayLike, depth_m: ArrayLike) -> CoarseEstimate:
+        """f2f step for a new live frame (stamps must increase); returns T≈."""
+        if not self.initialized:
+            raise TrackingError("tracker has no start pose: call reset(T_map_cam) first")
+        stamp = int(stamp_ns)
+        if self._last is not None and stamp <= self._last[0]:
+            raise TrackingError(f"frame stamp {stamp} is not after the previous frame's {self._last[0]}")
+        t0 = time.perf_counter()
+        frame = prepare_frame(rgb, depth_m, self.camera, config=self.config, name=f"frame {stamp}")
+        cfg = self.config
+        if self._last is None:
+            assert self._T_start is not None
+            T, prev_stamp, T_rel, res = self._T_start.copy(), None, np.eye(4), None
+            self._T_start = None
+        else:
+            prev_stamp, prev_frame, T_prev = self._last
+            res = align_frames(frame, prev_frame, config=cfg, use_color=cfg.f2f_color, use_depth=True)
+            T_rel = res.T_target_source
+            T = T_prev @ T_rel
+        seconds = time.perf_counter() - t0
+        self._pending[stamp] = _Pending(frame, T.copy(), T.copy(), prev_stamp, T_rel, res, seconds)
+        self._last = (stamp, frame, T.copy())
+        return CoarseEstimate(stamp, T, res, seconds)
+
+    def expired(self) -> list[int]:
+        """Stamps of pending frames beyond ``max_pending`` (oldest first): finish them with :meth:`skip_reference`."""
+        extra = len(self._pending) - self.config.max_pending
+        return list(self._pending)[:extra] if extra > 0 else []
+
+    def _finish(self, stamp: int, T: NDArray[np.float64], source: str, reason: str, f2m: AlignResult | None,
+                seconds: dict[str, float]) -> TrackResult:
+        p = self._pending.pop(stamp)
+        p.T_best = T
+        # re-chain the later frames (and the last frame) from the final pose of this one
+        prev_T = {stamp: T}
+        for s, q in self._pending.items():
+            if q.prev_stamp in prev_T:
+                q.T_best = prev_T[q.prev_stamp] @ q.T_prev_cur
+                prev_T[s] = q.T_best
+        if self._last is not None and self._last[0] in prev_T:
+            self._last = (self._last[0], self._last[1], prev_T[self._last[0]].copy())
+        seconds = {"f2f": p.f2f_seconds, **seconds}
+        return TrackResult(stamp, T.copy(), source, reason, p.f2f, f2m, seconds)
+
+    def refine(self, stamp_ns: int, ref_rgb: ArrayLike, ref_depth_m: ArrayLike) -> TrackResult:
+        """f2m step: align the pending frame ``stamp_ns`` to the reference rendered at its T≈; finishes the frame.
+
+        Earlier pending frames stay pending (see :meth:`expired` and :meth:`skip_reference`).
+        Raises :class:`TrackingError` if the frame is not pending or the reference is malformed (the frame stays
+        pending)."""
+        stamp = int(stamp_ns)
+        if stamp not in self._pending:
+            raise TrackingError(f"no pending frame with stamp {stamp} (late or unknown reference)")
+        p = self._pending[stamp]
+        t0 = time.perf_counter()
+        cfg = self.config
+        try:
+            ref = prepare_frame(ref_rgb, ref_depth_m, self.camera, config=cfg, name=f"reference {stamp}")
+        except TrackingError as exc:
+            if "no valid depth" in str(exc):
+                return self._finish(stamp, p.T_best, "f2f", "reference has no valid depth", None,
+                                    {"f2m": time.perf_counter() - t0})
+            raise
+        res = align_frames(p.frame, ref, config=cfg, use_color=cfg.f2m_color, use_depth=True)
+        seconds = {"f2m": time.perf_counter() - t0}
+        dt = float(np.linalg.norm(res.T_target_source[:3, 3]))
+        dr = float(rotation_angle_deg(res.T_target_source[:3, :3]))
+        if not res.converged:
+            return self._finish(stamp, p.T_best, "f2f", "f2m did not converge", res, seconds)
+        if dt > cfg.max_f2m_correction_m or dr > cfg.max_f2m_correction_deg:
+            return self._finish(stamp, p.T_best, "f2f", f"f2m correction too large ({dt:.3f} m, {dr:.1f} deg)",
+                                res, seconds)
+        # the reference was rendered at T≈ as published; later re-chaining of T_best does not move it
+        return self._finish(stamp, p.T_coarse @ res.T_target_source, "f2m", "", res, seconds)
+
+    def skip_reference(self, stamp_ns: int, reason: str = "no reference") -> TrackResult:
+        """Finish a pending frame without f2m: its (re-chained) f2f pose is final."""
+        stamp = int(stamp_ns)
+        if stamp not in self._pending:
+            raise TrackingError(f"no pending frame with stamp {stamp}")
+        return self._finish(stamp, self._pending[stamp].T_best, "f2f", reason, None, {})

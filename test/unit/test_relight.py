@@ -1,0 +1,152 @@
+"""The relit reference (§III-C/D) and the two-step tracker (§III-D) on a synthetic window room, and the sun-epoch
+assembler of the chunk stream (§III-E)."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from lightfast.camera import PinholeCamera
+from lightfast.daylight.brightness import BrightnessError, relit_image
+from lightfast.daylight.lighting_map import LightingMapConfig, prepare_lighting_map
+from lightfast.daylight.relight import DaylightRelighter, RelightConfig
+from lightfast.daylight.sun import FREIBURG
+from lightfast.daylight.sun_update import SunEpochAssembler, sun_radiosity
+from lightfast.geometry import compose, inverse, rotation_angle_deg, se3_exp
+from lightfast.sim.validation_rooms import box_room_with_window
+from lightfast.tracking import TrackingError
+from lightfast.tracking.pipeline import RGBDTracker, TrackerConfig
+from test.unit.test_brightness import S_TRUE, look_at
+
+CAMERA = PinholeCamera(320, 240, 250.0, 250.0, 159.5, 119.5)
+
+
+@pytest.fixture(scope="module")
+def room():
+    mesh = box_room_with_window(tessellation_m=0.1)
+    # texture: a checker of reflectance so that the photometric term has gradients
+    v = mesh.vertices_m
+    checker = ((np.floor(v[:, 0] / 0.3) + np.floor(v[:, 1] / 0.3) + np.floor(v[:, 2] / 0.3)) % 2)[:, None]
+    mesh = type(mesh)(mesh.vertices_m, mesh.faces, np.clip(mesh.reflectance * (0.55 + 0.6 * checker), 0.03, 0.95))
+    lmap = prepare_lighting_map(mesh, FREIBURG, LightingMapConfig(patch_size_m=0.5, sky_directions=256,
+                                                                  hemisphere_rays=32))
+    el = np.radians(35.0)
+    sun = sun_radiosity(lmap, np.array([0.0, -np.cos(el), np.sin(el)]))
+    return lmap, sun
+
+
+def live_frame(lmap, sun, crf, T):
+    comps = {"sun": sun, "sky": lmap.sky_radiosity, "ground": lmap.ground_radiosity}
+    r = relit_image(lmap, comps, S_TRUE, T, CAMERA, crf)
+    return r.rgb8(), r.depth_m
+
+
+T0 = look_at([2.25, 4.3, 1.6], [0.0, -2.8, -1.4])
+
+
+def test_relighter_estimates_scales_and_renders_the_live_image(room, true_crf):
+    lmap, sun = room
+    rgb, depth = live_frame(lmap, sun, true_crf, T0)
+    rl = DaylightRelighter(lmap, true_crf, config=RelightConfig(window=1))
+    with pytest.raises(BrightnessError, match="B̂_sun"):
+        rl.step(0, rgb, T0, CAMERA)
+    rl.set_sun_radiosity(sun, epoch_ns=1)
+    ref = rl.step(0, rgb, T0, CAMERA)
+    np.testing.assert_allclose(ref.scales, S_TRUE, rtol=0.03)
+    assert np.mean(np.abs(ref.color.astype(float) - rgb)) < 1.0
+    np.testing.assert_allclose(ref.depth_m, depth, atol=1e-5)
+    assert set(ref.seconds) >= {"render", "estimate"}
+    # reflectance reference: mean grey brightness matches the live image
+    rr = DaylightRelighter(lmap, true_crf, config=RelightConfig(reference="reflectance"))
+    rr.set_sun_radiosity(sun, epoch_ns=1)
+    refl = rr.step(0, rgb, T0, CAMERA)
+    grey = np.array([0.299, 0.587, 0.114])
+    hit = depth > 0
+    assert abs((refl.color[hit] @ grey).mean() - (rgb[hit] @ grey).mean()) < 2.0
+
+
+def test_relighter_rejects_bad_input(room, true_crf):
+    lmap, sun = room
+    rl = DaylightRelighter(lmap, true_crf)
+    with pytest.raises(BrightnessError):
+        rl.set_sun_radiosity(sun[:-1], epoch_ns=1)
+    rl.set_sun_radiosity(sun, epoch_ns=1)
+    with pytest.raises(BrightnessError, match="shape"):
+        rl.step(0, np.zeros((10, 10, 3), np.uint8), T0, CAMERA)
+    with pytest.raises(BrightnessError, match="4x4"):
+        rl.step(0, np.zeros((240, 320, 3), np.uint8), np.full((4, 4), np.nan), CAMERA)
+
+
+def test_two_step_tracker_recovers_a_perturbed_pose(room, true_crf):
+    """The f2m step against the relit reference pulls a wrong coarse pose back to the truth."""
+    lmap, sun = room
+    T1 = compose(T0, se3_exp([0.01, 0.0, 0.02, 0.0, 0.01, 0.0]))
+    rgb0, d0 = live_frame(lmap, sun, true_crf, T0)
+    rgb1, d1 = live_frame(lmap, sun, true_crf, T1)
+    rl = DaylightRelighter(lmap, true_crf)
+    rl.set_sun_radiosity(sun, epoch_ns=1)
+    for mode in ("proposed", "no-color-f2m", "depth-only"):
+        tracker = RGBDTracker(CAMERA, config=TrackerConfig(mode=mode))
+        # start 3 cm / 1.7° off: f2f keeps the error, f2m against the map removes it
+        T_start = compose(T0, se3_exp([0.02, -0.02, 0.01, 0.0, 0.03, 0.0]))
+        tracker.reset(T_start)
+        c0 = tracker.track_coarse(0, rgb0, d0)
+        assert np.allclose(c0.T_map_cam, T_start)
+        ref = rl.step(0, rgb0, c0.T_map_cam, CAMERA)
+        r0 = tracker.refine(0, ref.color, ref.depth_m)
+        assert r0.source == "f2m", r0.reason
+        E = compose(inverse(T0), r0.T_map_cam)
+        assert np.linalg.norm(E[:3, 3]) < 0.005 and rotation_angle_deg(E[:3, :3]) < 0.3, mode
+        c1 = tracker.track_coarse(1, rgb1, d1)
+        ref = rl.step(1, rgb1, c1.T_map_cam, CAMERA)
+        r1 = tracker.refine(1, ref.color, ref.depth_m)
+        E = compose(inverse(T1), r1.T_map_cam)
+        assert np.linalg.norm(E[:3, 3]) < 0.005 and rotation_angle_deg(E[:3, :3]) < 0.3, mode
+
+
+def test_tracker_pipelining_skip_and_errors(room, true_crf):
+    lmap, sun = room
+    rgb0, d0 = live_frame(lmap, sun, true_crf, T0)
+    T1 = compose(T0, se3_exp([0.01, 0.0, 0.0, 0.0, 0.0, 0.0]))
+    rgb1, d1 = live_frame(lmap, sun, true_crf, T1)
+    tracker = RGBDTracker(CAMERA, config=TrackerConfig(max_pending=1))
+    with pytest.raises(TrackingError, match="reset"):
+        tracker.track_coarse(0, rgb0, d0)
+    T_off = compose(T0, se3_exp([0.02, 0.0, 0.0, 0.0, 0.0, 0.0]))
+    tracker.reset(T_off)
+    tracker.track_coarse(0, rgb0, d0)
+    c1 = tracker.track_coarse(1, rgb1, d1)  # frame 0 still waits for its reference
+    assert tracker.pending_stamps == [0, 1] and tracker.expired() == [0]
+    rl = DaylightRelighter(lmap, true_crf)
+    rl.set_sun_radiosity(sun, epoch_ns=1)
+    ref0 = rl.step(0, rgb0, T_off, CAMERA)
+    r0 = tracker.refine(0, ref0.color, ref0.depth_m)  # late reference of frame 0 re-chains frame 1
+    assert r0.source == "f2m"
+    r1 = tracker.skip_reference(1, "timeout")
+    assert r1.source == "f2f" and r1.reason == "timeout"
+    E = compose(inverse(T1), r1.T_map_cam)  # f2f from the refined frame 0: near the truth, not 2 cm off
+    assert np.linalg.norm(E[:3, 3]) < 0.005
+    assert not np.allclose(r1.T_map_cam, c1.T_map_cam)
+    with pytest.raises(TrackingError, match="pending"):
+        tracker.refine(1, ref0.color, ref0.depth_m)
+    with pytest.raises(TrackingError, match="not after"):
+        tracker.track_coarse(1, rgb1, d1)
+    # a reference without depth finishes the frame with the f2f pose
+    tracker.track_coarse(2, rgb1, d1)
+    r2 = tracker.refine(2, ref0.color, np.zeros_like(ref0.depth_m))
+    assert r2.source == "f2f" and "depth" in r2.reason
+
+
+def test_sun_epoch_assembler_swaps_only_complete_epochs():
+    a = SunEpochAssembler(10)
+    B = np.arange(30, dtype=np.float32).reshape(10, 3)
+    assert a.add(5, np.arange(0, 6), B[:6]) is None
+    assert a.progress == pytest.approx(0.6)
+    assert a.add(7, np.arange(0, 4), B[:4] + 1) is None  # newer epoch replaces the unfinished one
+    assert a.add(5, np.arange(6, 10), B[6:]) is None  # late chunk of the superseded epoch: dropped
+    out = a.add(7, np.arange(4, 10), B[4:] + 1)
+    np.testing.assert_array_equal(out, B + 1)
+    assert a.completed_epoch_ns == 7 and a.add(7, np.arange(10), B) is None  # duplicate epoch ignored
+    with pytest.raises(ValueError, match="another lighting map"):
+        a.add(9, np.array([10]), B[:1])
+    with pytest.raises(ValueError, match="finite"):
+        a.add(9, np.array([0]), np.full((1, 3), np.nan))
