@@ -8,7 +8,8 @@ from glob import glob
 from setuptools import find_packages, setup
 
 PACKAGE = "lightfast"
-NODES: list[str] = ["sun_update_node"]  # node packages, one per capability, added when each is built
+# node packages, one per capability, added when each is built
+NODES: list[str] = ["sun_update_node", "daylight_relight_node", "rgbd_tracker_node"]
 
 setup(
     name=PACKAGE,

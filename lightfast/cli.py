@@ -290,6 +290,11 @@ def build_parser() -> argparse.ArgumentParser:
     _add_passthrough(crf_sub, "calibrate", "lightfast.daylight.crf:main_crf_calibrate",
                      "fit the camera response from an exposure bracket (see `crf calibrate --help`)")
 
+    ev = sub.add_parser("eval", help="evaluations that reproduce the papers' tables")
+    ev_sub = ev.add_subparsers(dest="eval_command", required=True, metavar="EVALUATION")
+    _add_passthrough(ev_sub, "daylight", "lightfast.eval.daylight:main_eval_daylight",
+                     "Table I: the tracker and its ablations on the daylight recordings (see `eval daylight --help`)")
+
     dds = sub.add_parser("dds", help="DDS transport settings")
     dds_sub = dds.add_subparsers(dest="dds_command", required=True, metavar="DDS_COMMAND")
     p = dds_sub.add_parser("env", help="print the export lines that run nodes by hand with lightfast's profile")

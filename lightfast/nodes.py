@@ -13,6 +13,8 @@ from lightfast.io import write_text_atomic
 
 NODE_CONFIGS: dict[str, str] = {
     "sun_update_node": "lightfast.daylight.sun_update:SunUpdateConfig",
+    "daylight_relight_node": "lightfast.daylight.relight:RelightConfig",
+    "rgbd_tracker_node": "lightfast.tracking.pipeline:TrackerConfig",
 }
 
 

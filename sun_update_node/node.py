@@ -14,6 +14,7 @@ import sys
 import numpy as np
 import rclpy
 from geometry_msgs.msg import Vector3, Vector3Stamped
+from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from sensor_msgs.msg import PointCloud2
 
@@ -100,7 +101,7 @@ def main(args: list[str] | None = None) -> int:
     except (LightfastError, ConfigError) as exc:
         print(f"sun_update_node: error: {exc}", file=sys.stderr)
         return 1
-    except KeyboardInterrupt:
+    except (KeyboardInterrupt, ExternalShutdownException):  # Ctrl-C, or SIGTERM through rclpy's handler
         pass
     finally:
         if node is not None:

@@ -21,6 +21,7 @@ import json
 import logging
 import os
 import zipfile
+from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
@@ -81,12 +82,19 @@ class LightingMap:
     site: Site
     config: LightingMapConfig
     patches: Patches
-    transport: PatchTransport
+    transport_source: PatchTransport | Callable[[], PatchTransport]  # the transport, or how to build it on demand
     sky_radiosity: NDArray[np.float32]  # (V, 3) B̂_sky
     ground_radiosity: NDArray[np.float32]  # (V, 3) B̂_grd
 
     def __post_init__(self) -> None:
         _ = self.mesh.vertex_normals  # computed once here, not inside the first bounded sun-update step
+
+    @cached_property
+    def transport(self) -> PatchTransport:
+        """The patch transport of Eq. 2. A loaded map builds it from the visibility bits on first use (only the sun
+        update needs it; relighting does not pay for it)."""
+        src = self.transport_source
+        return src if isinstance(src, PatchTransport) else src()
 
     @cached_property
     def caster(self) -> RayCaster:
@@ -209,8 +217,14 @@ class LightingMap:
             vertex_to_patch=sp.csc_matrix(csr("vertex_to_patch")),
             patch_to_vertex=csr("patch_to_vertex"),
         )
-        visible = np.unpackbits(a["visibility_bits"], count=P * P).reshape(P, P).astype(bool)
-        transport = PatchTransport.from_visibility(patches, visible, a["coverage"])
+        bits, coverage = a["visibility_bits"], a["coverage"]
+        if len(bits) != -(-P * P // 8) or coverage.shape[0] != P:
+            raise ValueError("visibility bits or coverage do not match the patch count")
+
+        def transport() -> PatchTransport:
+            visible = np.unpackbits(bits, count=P * P).reshape(P, P).astype(bool)
+            return PatchTransport.from_visibility(patches, visible, coverage)
+
         return cls(mesh, site, config, patches, transport, a["sky_radiosity"], a["ground_radiosity"])
 
 

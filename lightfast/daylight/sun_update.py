@@ -162,6 +162,7 @@ class SunUpdatePipeline:
 
     def __init__(self, lmap: LightingMap, config: SunUpdateConfig, *, site: Site | None = None) -> None:
         self.lmap = lmap
+        _ = lmap.transport  # build it now (a loaded map builds it lazily), not inside the first bounded step
         self.config = config
         self.site = site or lmap.site
         self.current: SunUpdate | None = None

@@ -112,7 +112,7 @@ def _frames(bag_dir: Path) -> Iterator[tuple[int, NDArray[np.uint8], NDArray[np.
     parts: dict[int, dict[str, object]] = {}
     need = (COLOR_TOPIC, DEPTH_TOPIC, COLOR_INFO_TOPIC, GT_POSE_TOPIC)
     with open_bag(bag_dir) as bag:
-        for m in bag.messages(need):
+        for m in bag.messages(topics=need):
             msg = bag.deserialize(m)
             stamp = int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
             p = parts.setdefault(stamp, {})
@@ -327,7 +327,7 @@ def brightness_correlation(run: SequenceRun, seq_dir: Path) -> float:
 
 def evaluate_daylight(sim_dir: Path, out_dir: Path, *, methods: Sequence[str] = tuple(METHODS),
                       sequences: Sequence[str] | None = None, maps_dir: Path | None = None,
-                      max_frames: int | None = None, progress: bool = True,
+                      max_frames: int | None = None, progress: bool = True, jobs: int = 1,
                       on_run: Callable[[SequenceRun], None] | None = None) -> list[SequenceRun]:
     """Run ``methods`` over the recordings in ``sim_dir`` and write ``daylight_table.md``, ``daylight_frames.csv``,
     ``daylight_summary.json`` and PNG plots into ``out_dir``."""
@@ -345,21 +345,27 @@ def evaluate_daylight(sim_dir: Path, out_dir: Path, *, methods: Sequence[str] = 
         raise EvalError(f"no recordings in {sim_dir} (make them with `lightfast sim daylight {sim_dir}`)")
     maps_dir = maps_dir or sim_dir / "maps"
     out_dir.mkdir(parents=True, exist_ok=True)
-    runs: list[SequenceRun] = []
-    maps: dict[str, LightingMap] = {}
     t0 = time.perf_counter()
-    for seq in seq_dirs:
-        scene = json.loads((seq / "sequence.json").read_text())["sequence"]["scene"]
-        if scene not in maps:
-            maps.clear()  # one scene's map in memory at a time
-            maps[scene] = _lighting_map(scene, sim_dir, maps_dir, progress)
-        lmap = maps[scene]
-        sun_B = sequence_sun_radiosity(seq, lmap)
-        for m in methods:
-            run = run_sequence(seq, lmap, m, max_frames=max_frames, progress=progress, sun_B=sun_B)
-            runs.append(run)
+    jobs_list = [(str(seq), m, str(maps_dir), max_frames, str(sim_dir)) for seq in seq_dirs for m in methods]
+    runs: list[SequenceRun] = []
+    if jobs <= 1:
+        for job in track(jobs_list, desc="daylight evaluation", enabled=progress, unit="run"):
+            runs.append(_run_job(job))
             if on_run is not None:
-                on_run(run)
+                on_run(runs[-1])
+    else:
+        import multiprocessing as mp
+        from concurrent.futures import ProcessPoolExecutor
+
+        for scene in dict.fromkeys(json.loads((s / "sequence.json").read_text())["sequence"]["scene"]
+                                   for s in seq_dirs):
+            _lighting_map(scene, sim_dir, maps_dir, progress)  # prepare once, before the workers load it
+        with ProcessPoolExecutor(max_workers=jobs, mp_context=mp.get_context("spawn")) as pool:
+            for run in track(pool.map(_run_job, jobs_list), desc="daylight evaluation", total=len(jobs_list),
+                             enabled=progress, unit="run"):
+                runs.append(run)
+                if on_run is not None:
+                    on_run(run)
     methods = list(methods)
     summary = {
         "methods": methods,
@@ -376,3 +382,55 @@ def evaluate_daylight(sim_dir: Path, out_dir: Path, *, methods: Sequence[str] = 
     write_text_atomic(out_dir / "daylight_summary.json", json.dumps(summary, indent=1) + "\n")
     _plots(out_dir, runs, sim_dir)
     return runs
+
+
+def _run_job(job: tuple[str, str, str, int | None, str]) -> SequenceRun:
+    """Worker of ``--jobs``: one (recording, method) run in its own process."""
+    seq_dir, method, maps_dir, max_frames, sim_dir = job
+    seq = Path(seq_dir)
+    scene = json.loads((seq / "sequence.json").read_text())["sequence"]["scene"]
+    lmap = _cached_map(scene, Path(sim_dir), Path(maps_dir))
+    return run_sequence(seq, lmap, method, max_frames=max_frames, progress=False,
+                        sun_B=_cached_sun(seq, lmap))
+
+
+_MAPS: dict[str, LightingMap] = {}
+_SUNS: dict[str, NDArray[np.float32]] = {}
+
+
+def _cached_map(scene: str, sim_dir: Path, maps_dir: Path) -> LightingMap:
+    if scene not in _MAPS:
+        _MAPS.clear()
+        _SUNS.clear()
+        _MAPS[scene] = _lighting_map(scene, sim_dir, maps_dir, progress=False)
+    return _MAPS[scene]
+
+
+def _cached_sun(seq: Path, lmap: LightingMap) -> NDArray[np.float32]:
+    if seq.name not in _SUNS:
+        _SUNS[seq.name] = sequence_sun_radiosity(seq, lmap)
+    return _SUNS[seq.name]
+
+
+def main_eval_daylight(argv: Sequence[str] | None = None) -> int:
+    """``lightfast eval daylight SIM_DIR OUT``: the Table I evaluation (see the module docstring)."""
+    import argparse
+    import sys
+
+    p = argparse.ArgumentParser(prog="lightfast eval daylight", description=__doc__.split("\n\n")[0])
+    p.add_argument("sim_dir", type=Path, help="directory of recordings made by `lightfast sim daylight`")
+    p.add_argument("out", type=Path, help="output directory for the table, CSV, JSON and plots")
+    p.add_argument("--methods", default=",".join(METHODS), help=f"comma-separated subset of {', '.join(METHODS)}")
+    p.add_argument("--sequences", default="", help="comma-separated recordings (default: all in SIM_DIR)")
+    p.add_argument("--maps", type=Path, default=None, help="lighting map cache directory (default SIM_DIR/maps)")
+    p.add_argument("--max-frames", type=int, default=None, help="evaluate only the first N frames of each recording")
+    p.add_argument("--jobs", type=int, default=1, help="parallel worker processes (one recording x method each)")
+    args = p.parse_args(argv)
+    methods = [m for m in args.methods.split(",") if m]
+    sequences = [s for s in args.sequences.split(",") if s] or None
+    progress = sys.stderr.isatty()
+    runs = evaluate_daylight(args.sim_dir, args.out, methods=methods, sequences=sequences, maps_dir=args.maps,
+                             max_frames=args.max_frames, progress=progress, jobs=args.jobs)
+    print((args.out / "daylight_table.md").read_text(), end="")
+    print(f"{len(runs)} runs; wrote {args.out}")
+    return 0

@@ -75,6 +75,7 @@ __all__ = [
     "align_frames",
     "prepare_frame",
     "track_sequence",
+    "warm_up",
 ]
 
 #: Tracking variants of paper §IV: the proposed method and its baselines.
@@ -634,3 +635,18 @@ def track_sequence(
     if not poses:
         raise TrackingError("track_sequence got no frames")
     return SequenceTrack(np.stack(poses), tuple(results), np.asarray(seconds))
+
+
+def warm_up(config: TrackingConfig | None = None) -> float:
+    """Run every jitted kernel once on a tiny synthetic frame (a slanted plane with a colour ramp) with ``config``'s
+    pyramid, so that a node's first live frame does not pay for numba's loading or compiling; returns seconds."""
+    cfg = TrackingConfig() if config is None else config
+    t0 = time.perf_counter()
+    size = max(16, 8 * 2 ** (cfg.pyramid_levels - 1) * (2 if cfg.resolution_scale != 1.0 else 1))
+    camera = PinholeCamera(size, size, float(size), float(size), (size - 1) / 2, (size - 1) / 2)
+    v, u = np.mgrid[0:size, 0:size].astype(np.float32) / size
+    depth = (0.5 * (cfg.min_depth_m + cfg.max_depth_m) * (1.0 + 0.05 * u + 0.03 * v)).astype(np.float32)
+    rgb = (np.stack([u, v, 0.5 * (u + v)], axis=-1) * 255).astype(np.uint8)
+    frame = prepare_frame(rgb, depth, camera, config=cfg, name="warm-up frame")
+    align_frames(frame, frame, config=cfg, use_color=True, use_depth=True)
+    return time.perf_counter() - t0

@@ -1,0 +1,1 @@
+"""``daylight_relight_node``: brightness scales and the relit reference colour + depth per live frame (§III-C/D)."""

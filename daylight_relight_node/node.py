@@ -1,0 +1,347 @@
+"""``daylight_relight_node``: the relit reference colour + depth of each live frame at its coarse pose (paper §III-C,
+§III-D), for the frame-to-model step of ``rgbd_tracker_node``.
+
+Subscribes the live colour image ``/camera/color/image_raw`` (rgb8) with ``/camera/color/camera_info``, the
+tracker's coarse pose ``/tracker/coarse_pose`` (PoseStamped in ``map``, stamped with the image it belongs to) and
+the B̂_sun chunks ``/radiosity/sun_chunk`` of ``sun_update_node``. Image and coarse pose are paired by exact stamp
+(either may come first). A new B̂_sun is swapped in only when every vertex of its epoch has arrived; until the first
+complete epoch no reference is published. For each pair it publishes, with the image's stamp and frame:
+``/relight/reference/color`` (rgb8), ``/relight/reference/depth`` (32FC1 metres, 0 = no geometry), the averaged
+brightness scales ``/relight/scale/{sun,sky,ground}`` (Vector3Stamped, x=r, y=g, z=b) and ``/relight/status``
+(DiagnosticArray: sun epoch, chunk progress, pixels used, stage timings).
+
+Threading: the subscription callbacks only convert and buffer; the relighting runs in a guard-condition callback
+of its own mutually exclusive callback group (one frame per call), which also applies a completed B̂_sun and
+parameter changes, so nothing mutates the relighter while it renders. Under a single-threaded executor the chunk
+subscription is served between frames; under a multi-threaded one it runs beside them.
+"""
+from __future__ import annotations
+
+import sys
+import threading
+import time
+from collections import deque
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PoseStamped, Vector3, Vector3Stamped
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import CameraInfo, Image, PointCloud2
+
+from lightfast.camera import PinholeCamera
+from lightfast.config import ConfigError
+from lightfast.daylight.crf import load_crf
+from lightfast.daylight.lighting_map import LightingMap
+from lightfast.daylight.relight import DaylightRelighter, Reference, RelightConfig
+from lightfast.daylight.sun_update import SunEpochAssembler
+from lightfast.errors import LightfastError
+from lightfast.ros.convert import (
+    ConversionError,
+    camera_from_camera_info,
+    image_to_numpy,
+    make_header,
+    numpy_to_image,
+    pointcloud2_to_numpy,
+    pose_stamped_to_matrix,
+    stamp_to_ns,
+)
+from lightfast.ros.diagnostics import Level, ProblemLog, diagnostic_array, diagnostic_status
+from lightfast.ros.params import ConfigParameters
+from lightfast.ros.qos import SENSOR_QOS
+from lightfast.ros.sync import ExactTimePairs
+from lightfast.ros.transport import use_local_transport
+from lightfast.topics import (
+    COARSE_POSE_TOPIC,
+    COLOR_INFO_TOPIC,
+    COLOR_TOPIC,
+    MAP_FRAME,
+    REFERENCE_COLOR_TOPIC,
+    REFERENCE_DEPTH_TOPIC,
+    RELIGHT_STATUS_TOPIC,
+    SCALE_TOPIC_PREFIX,
+    SUN_CHUNK_TOPIC,
+)
+
+NODE_NAME = "daylight_relight_node"
+#: Images and coarse poses waiting for their partner (per side): about a second of frames at 30 Hz.
+MAX_UNPAIRED = 30
+#: Paired frames waiting for the relighter; when it falls behind the oldest are dropped (the tracker gave up on them).
+MAX_QUEUED = 4
+#: The chunk stream must not lose a chunk, or its epoch never completes.
+CHUNK_QOS = QoSProfile(depth=200, reliability=ReliabilityPolicy.RELIABLE)
+CHUNK_FIELDS = ("vertex", "r", "g", "b")
+STATUS_PERIOD_S = 1.0
+
+
+@dataclass
+class _Frame:
+    stamp_ns: int
+    rgb: np.ndarray
+    frame_id: str
+    T_map_cam: np.ndarray
+
+
+class DaylightRelightNode(Node):
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__(NODE_NAME, **kwargs)
+        self.params = ConfigParameters(self, RelightConfig)
+        cfg = self.params.config
+        if not cfg.lighting_map:
+            raise ConfigError("parameter lighting_map is required (a directory made by `lightfast daylight prepare`)")
+        if not cfg.crf_file:
+            raise ConfigError("parameter crf_file is required (`lightfast crf calibrate` output or a camera.yaml)")
+        lmap = LightingMap.load(cfg.lighting_map)
+        self.relighter = DaylightRelighter(lmap, load_crf(cfg.crf_file), config=cfg)
+        self.assembler = SunEpochAssembler(lmap.num_vertices)
+        self._warm_up(lmap)
+        self.problems = ProblemLog(self._log)
+
+        self._lock = threading.Lock()  # guards everything the input callbacks share with the worker
+        self._pairs: ExactTimePairs[tuple[np.ndarray, str], np.ndarray] = ExactTimePairs(MAX_UNPAIRED)
+        self._queue: deque[_Frame] = deque()
+        self._camera: PinholeCamera | None = None
+        self._new_sun: tuple[np.ndarray, int] | None = None
+        self._new_config: RelightConfig | None = None
+        self.params.on_change = self._on_config
+        self.stats = {"frames_in": 0, "poses_in": 0, "references": 0, "dropped_behind": 0, "dropped_unpaired": 0,
+                      "waiting_for_sun": 0, "bad_inputs": 0, "chunks": 0}
+        self._last: dict[str, Any] = {}
+        self._status = (Level.WARN, "waiting for the first complete sun epoch")
+
+        inputs = MutuallyExclusiveCallbackGroup()
+        work = MutuallyExclusiveCallbackGroup()
+        self.color_pub = self.create_publisher(Image, REFERENCE_COLOR_TOPIC, SENSOR_QOS)
+        self.depth_pub = self.create_publisher(Image, REFERENCE_DEPTH_TOPIC, SENSOR_QOS)
+        self.scale_pubs = {name: self.create_publisher(Vector3Stamped, SCALE_TOPIC_PREFIX + name, SENSOR_QOS)
+                           for name in self.relighter.names}
+        self.status_pub = self.create_publisher(DiagnosticArray, RELIGHT_STATUS_TOPIC, SENSOR_QOS)
+        self.create_subscription(Image, COLOR_TOPIC, self._on_image, SENSOR_QOS, callback_group=inputs)
+        self.create_subscription(CameraInfo, COLOR_INFO_TOPIC, self._on_camera_info, SENSOR_QOS,
+                                 callback_group=inputs)
+        self.create_subscription(PoseStamped, COARSE_POSE_TOPIC, self._on_pose, SENSOR_QOS, callback_group=inputs)
+        self.create_subscription(PointCloud2, SUN_CHUNK_TOPIC, self._on_chunk, CHUNK_QOS, callback_group=inputs)
+        self.work_trigger = self.create_guard_condition(self._work, callback_group=work)
+        self.status_timer = self.create_timer(STATUS_PERIOD_S, self._heartbeat, callback_group=work)
+        self.get_logger().info(
+            f"lighting map {cfg.lighting_map}: {lmap.num_vertices} vertices; camera response {cfg.crf_file}; "
+            f"reference {cfg.reference}, method {cfg.method}; waiting for the first complete sun epoch"
+        )
+
+    # ---------------------------------------------------------------------------------------------- helpers
+
+    @staticmethod
+    def _warm_up(lmap: LightingMap) -> None:
+        """Build the ray-casting BVH now (it is lazy), so the first frame does not pay for it."""
+        lmap.caster.intersect(np.zeros(3), np.array([[0.0, 0.0, 1.0]]))
+
+    def _log(self, level: Level, text: str) -> None:
+        logger = self.get_logger()  # rclpy refuses one call site with several severities: one line each
+        if level == Level.OK:
+            logger.info(text)
+        elif level == Level.WARN:
+            logger.warning(text)
+        else:
+            logger.error(text)
+
+    def _now_ns(self) -> int:
+        return self.get_clock().now().nanoseconds
+
+    def _problem(self, key: str, text: str, level: Level = Level.WARN, stamp_ns: int | None = None) -> None:
+        """Bad input or a failed step: throttled log line and a status message; the node carries on."""
+        self.stats["bad_inputs"] += 1
+        self.problems.report(key, text, level)
+        self._publish_status(level, text, stamp_ns=stamp_ns)
+
+    def _publish_status(self, level: Level, message: str, *, stamp_ns: int | None = None) -> None:
+        self._status = (level, message)
+        a = self.assembler
+        values: dict[str, Any] = {
+            "sun_epoch_ns": self.relighter.sun_epoch_ns,
+            "pending_epoch_ns": a.pending_epoch_ns,
+            "chunk_progress": a.progress if a.pending_epoch_ns is not None else None,
+            **self.stats,
+            "queued": len(self._queue),
+            "stamp_ns": stamp_ns,  # the frame this status is about (None: not about a frame)
+            **self._last,
+        }
+        stamp = self._now_ns() if stamp_ns is None else stamp_ns
+        self.status_pub.publish(diagnostic_array(stamp, [diagnostic_status(NODE_NAME, level, message, values)]))
+
+    def _heartbeat(self) -> None:
+        if not self.relighter.ready:
+            a = self.assembler
+            progress = f" (epoch {a.pending_epoch_ns} at {100 * a.progress:.0f}%)" if a.pending_epoch_ns else ""
+            self.problems.report("waiting", f"no reference yet: waiting for the first complete sun epoch on "
+                                 f"{SUN_CHUNK_TOPIC}{progress}", Level.OK)
+        self._publish_status(*self._status)
+
+    # ---------------------------------------------------------------------------------------------- inputs
+
+    def _on_image(self, msg: Image) -> None:
+        try:
+            stamp = stamp_to_ns(msg.header.stamp)
+            if msg.encoding != "rgb8":
+                raise ConversionError(f"colour image encoding {msg.encoding!r} is not supported (need rgb8)")
+            rgb = image_to_numpy(msg)
+        except ConversionError as exc:
+            self._problem("image", f"dropped colour image on {COLOR_TOPIC}: {exc}")
+            return
+        with self._lock:
+            self.stats["frames_in"] += 1
+            pair = self._pairs.add_first(stamp, (rgb, msg.header.frame_id))
+            self._enqueue(stamp, pair)
+
+    def _on_pose(self, msg: PoseStamped) -> None:
+        try:
+            T, stamp, frame_id = pose_stamped_to_matrix(msg)
+            if frame_id not in ("", MAP_FRAME):
+                raise ConversionError(f"frame_id {frame_id!r} is not {MAP_FRAME!r}")
+        except ConversionError as exc:
+            self._problem("pose", f"dropped coarse pose on {COARSE_POSE_TOPIC}: {exc}")
+            return
+        with self._lock:
+            self.stats["poses_in"] += 1
+            self._enqueue(stamp, self._pairs.add_second(stamp, T))
+
+    def _enqueue(self, stamp: int, pair: tuple[tuple[np.ndarray, str], np.ndarray] | None) -> None:
+        self.stats["dropped_unpaired"] = self._pairs.dropped
+        if pair is None:
+            return
+        (rgb, frame_id), T = pair
+        self._queue.append(_Frame(stamp, rgb, frame_id, T))
+        while len(self._queue) > MAX_QUEUED:
+            self._queue.popleft()
+            self.stats["dropped_behind"] += 1
+        self.work_trigger.trigger()
+
+    def _on_camera_info(self, msg: CameraInfo) -> None:
+        try:
+            camera = camera_from_camera_info(msg)
+        except ConversionError as exc:
+            self._problem("camera_info", f"ignored {COLOR_INFO_TOPIC}: {exc}")
+            return
+        with self._lock:
+            self._camera = camera
+
+    def _on_chunk(self, msg: PointCloud2) -> None:
+        try:
+            epoch = stamp_to_ns(msg.header.stamp)
+            points = pointcloud2_to_numpy(msg)
+            missing = [f for f in CHUNK_FIELDS if f not in (points.dtype.names or ())]
+            if missing:
+                raise ConversionError(f"chunk lacks the field(s) {', '.join(missing)} (needs vertex, r, g, b)")
+            radiosity = np.stack([points["r"], points["g"], points["b"]], axis=1)
+            complete = self.assembler.add(epoch, points["vertex"], radiosity)
+        except (ConversionError, ValueError) as exc:
+            self._problem("chunk", f"dropped sun chunk on {SUN_CHUNK_TOPIC}: {exc}", Level.ERROR)
+            return
+        self.stats["chunks"] += 1
+        if complete is not None:
+            with self._lock:
+                self._new_sun = (complete, epoch)
+            self.work_trigger.trigger()
+
+    def _on_config(self, cfg: RelightConfig) -> None:
+        with self._lock:
+            self._new_config = cfg
+        self.work_trigger.trigger()
+
+    # ---------------------------------------------------------------------------------------------- worker
+
+    def _work(self) -> None:
+        try:
+            self._work_once()
+        except LightfastError as exc:  # a safety net: an unexpected core error must not stop the node
+            self._problem("internal", f"relight step failed: {exc}", Level.ERROR)
+
+    def _work_once(self) -> None:
+        with self._lock:
+            new_sun, self._new_sun = self._new_sun, None
+            new_config, self._new_config = self._new_config, None
+            frame = self._queue.popleft() if self._queue else None
+            camera = self._camera
+            more = bool(self._queue)
+        if new_config is not None:
+            self.relighter.reconfigure(new_config)
+        if new_sun is not None:
+            first = not self.relighter.ready
+            self.relighter.set_sun_radiosity(*new_sun)
+            self.get_logger().info(f"sun epoch {new_sun[1]} complete: B̂_sun swapped in"
+                                   + ("; publishing references" if first else ""))
+            self._publish_status(Level.OK, f"sun epoch {new_sun[1]} swapped in")
+        if frame is not None:
+            self._process(frame, camera)
+        if more:
+            self.work_trigger.trigger()  # one frame per call: the other callbacks get their turn in between
+
+    def _process(self, f: _Frame, camera: PinholeCamera | None) -> None:
+        stamp = f.stamp_ns
+        if camera is None:
+            self._problem("no_camera_info", f"no reference for frame {stamp}: no camera_info on {COLOR_INFO_TOPIC} "
+                          "yet", stamp_ns=stamp)
+            return
+        if f.rgb.shape[:2] != camera.shape:
+            self._problem("size", f"no reference for frame {stamp}: colour image is {f.rgb.shape[1]}x"
+                          f"{f.rgb.shape[0]}, camera_info says {camera.width}x{camera.height}", stamp_ns=stamp)
+            return
+        if not self.relighter.ready:
+            self.stats["waiting_for_sun"] += 1
+            a = self.assembler
+            progress = f" (epoch {a.pending_epoch_ns} at {100 * a.progress:.0f}%)" if a.pending_epoch_ns else ""
+            self.problems.report("waiting", f"no reference yet: waiting for the first complete sun epoch on "
+                                 f"{SUN_CHUNK_TOPIC}{progress}", Level.OK)
+            self._publish_status(Level.WARN, "waiting for the first complete sun epoch", stamp_ns=stamp)
+            return
+        t0 = time.perf_counter()
+        try:
+            ref = self.relighter.step(stamp, f.rgb, f.T_map_cam, camera)
+        except LightfastError as exc:
+            self._problem("step", f"no reference for frame {stamp}: {exc}", Level.ERROR, stamp_ns=stamp)
+            return
+        self._publish_reference(ref, f.frame_id)
+        self.stats["references"] += 1
+        self._last = {
+            "pixels_used": ref.num_pixels,
+            "frame_scales_used": ref.frame_scales is not None,
+            **{f"{k}_ms": 1e3 * v for k, v in ref.seconds.items()},
+            "total_ms": 1e3 * (time.perf_counter() - t0),
+        }
+        self._publish_status(Level.OK, "reference published", stamp_ns=stamp)
+
+    def _publish_reference(self, ref: Reference, frame_id: str) -> None:
+        stamp = ref.stamp_ns
+        self.color_pub.publish(numpy_to_image(ref.color, "rgb8", stamp_ns=stamp, frame_id=frame_id))
+        self.depth_pub.publish(numpy_to_image(ref.depth_m, "32FC1", stamp_ns=stamp, frame_id=frame_id))
+        for name, pub in self.scale_pubs.items():
+            s = ref.scale(name)
+            pub.publish(Vector3Stamped(header=make_header(stamp, frame_id),
+                                       vector=Vector3(x=float(s[0]), y=float(s[1]), z=float(s[2]))))
+
+
+def main(args: list[str] | None = None) -> int:
+    use_local_transport()
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = DaylightRelightNode()
+        rclpy.spin(node)
+    except (LightfastError, ConfigError) as exc:
+        print(f"{NODE_NAME}: error: {exc}", file=sys.stderr)
+        return 1
+    except (KeyboardInterrupt, ExternalShutdownException):  # Ctrl-C, or SIGTERM through rclpy's handler
+        pass
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

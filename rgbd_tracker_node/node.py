@@ -1,0 +1,437 @@
+"""``rgbd_tracker_node``: two-step direct RGB-D tracking (paper §III-D, Eq. 7) — frame-to-frame against the previous
+frame, then frame-to-model against the relit reference of ``daylight_relight_node``.
+
+Subscribes ``/camera/color/image_raw`` (rgb8), ``/camera/depth/image_raw`` (32FC1 metres or 16UC1 millimetres,
+registered to the colour camera) and ``/camera/color/camera_info``; colour and depth are paired by exact stamp. Per
+frame the f2f step gives T≈, published as ``/tracker/coarse_pose`` (PoseStamped in ``map``, the image's stamp).
+The reference colour + depth rendered there (``/relight/reference/color`` rgb8, ``/relight/reference/depth``
+32FC1, paired by stamp) refine it (f2m). A frame whose reference has not come within ``reference_timeout_s`` (wall
+time), or that falls out of the ``max_pending`` window, or whose successor's reference comes first, is finished
+with its f2f pose. Each finished frame is published on ``/tracker/pose`` (PoseStamped, ``map``),
+``/tracker/odometry`` (nav_msgs/Odometry, child frame = the image's optical frame) and ``/tracker/status``
+(DiagnosticArray: source f2m/f2f, reason, mode, f2f/f2m ms, inlier ratios, latency). Tracking starts at the
+``initial_pose`` parameter; a PoseStamped on ``/tracker/reset`` restarts it at that pose.
+
+Threading as in ``daylight_relight_node``: the subscription callbacks only convert and buffer; the tracking runs in
+a guard-condition callback of its own callback group (references first, then one new frame per call), and a timer
+of the same group wakes it for reference deadlines. Parameter changes are applied there too.
+"""
+from __future__ import annotations
+
+import sys
+import threading
+import time
+from collections import OrderedDict, deque
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PoseStamped
+from nav_msgs.msg import Odometry
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from sensor_msgs.msg import CameraInfo, Image
+
+from lightfast.camera import PinholeCamera
+from lightfast.config import ConfigError
+from lightfast.errors import LightfastError
+from lightfast.ros.convert import (
+    ConversionError,
+    camera_from_camera_info,
+    image_to_numpy,
+    matrix_to_odometry,
+    matrix_to_pose_stamped,
+    pose_stamped_to_matrix,
+    stamp_to_ns,
+)
+from lightfast.ros.diagnostics import Level, ProblemLog, diagnostic_array, diagnostic_status
+from lightfast.ros.params import ConfigParameters
+from lightfast.ros.qos import SENSOR_QOS
+from lightfast.ros.sync import ExactTimePairs
+from lightfast.ros.transport import use_local_transport
+from lightfast.topics import (
+    COARSE_POSE_TOPIC,
+    COLOR_INFO_TOPIC,
+    COLOR_TOPIC,
+    DEPTH_TOPIC,
+    MAP_FRAME,
+    OPTICAL_FRAME,
+    REFERENCE_COLOR_TOPIC,
+    REFERENCE_DEPTH_TOPIC,
+    TRACKER_ODOMETRY_TOPIC,
+    TRACKER_POSE_TOPIC,
+    TRACKER_RESET_TOPIC,
+    TRACKER_STATUS_TOPIC,
+)
+from lightfast.tracking.pipeline import RGBDTracker, TrackerConfig, TrackResult
+from lightfast.tracking.rgbd_odometry import TrackingError, warm_up
+
+NODE_NAME = "rgbd_tracker_node"
+#: Unpaired colour / depth images (and reference colour / depth) kept per side.
+MAX_UNPAIRED = 10
+#: Paired live frames waiting for the tracker; when it falls behind the oldest are dropped.
+MAX_QUEUED = 4
+#: Options that change how frames are prepared: a change restarts tracking at the last pose.
+_PREPARATION_FIELDS = ("pyramid_levels", "resolution_scale", "min_depth_m", "max_depth_m", "depth_discontinuity_m")
+_MM_TO_M = np.float32(0.001)
+
+
+def depth_to_metres(msg: Image) -> np.ndarray:
+    """A depth image as float32 metres: 32FC1 as it is (NaN/0 invalid), 16UC1 millimetres scaled (0 stays invalid)."""
+    if msg.encoding == "32FC1":
+        return image_to_numpy(msg)
+    if msg.encoding == "16UC1":
+        return image_to_numpy(msg).astype(np.float32) * _MM_TO_M
+    raise ConversionError(f"depth image encoding {msg.encoding!r} is not supported (need 32FC1 m or 16UC1 mm)")
+
+
+def color_to_numpy(msg: Image) -> np.ndarray:
+    if msg.encoding != "rgb8":
+        raise ConversionError(f"colour image encoding {msg.encoding!r} is not supported (need rgb8)")
+    return image_to_numpy(msg)
+
+
+@dataclass
+class _Frame:
+    stamp_ns: int
+    rgb: np.ndarray
+    depth_m: np.ndarray
+    frame_id: str
+    received: float  # time.monotonic() when the pair was complete
+
+
+@dataclass
+class _Pending:
+    frame_id: str
+    received: float
+    coarse_at: float  # time.monotonic() when T≈ was published: the reference deadline counts from here
+
+
+class RGBDTrackerNode(Node):
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__(NODE_NAME, **kwargs)
+        self.params = ConfigParameters(self, TrackerConfig)
+        cfg = self.params.config
+        self.config = cfg
+        warm_s = warm_up(cfg)
+        self.problems = ProblemLog(self._log)
+        self.tracker: RGBDTracker | None = None
+        self._start_pose = cfg.T_map_cam_initial  # where the tracker (re)starts when it is created
+        self._last_pose: np.ndarray | None = None  # newest T≈, to restart from after a camera/config change
+        self._pending: OrderedDict[int, _Pending] = OrderedDict()
+
+        self._lock = threading.Lock()  # guards everything the input callbacks share with the worker
+        self._live: ExactTimePairs[tuple[np.ndarray, str], np.ndarray] = ExactTimePairs(MAX_UNPAIRED)
+        self._refs: ExactTimePairs[np.ndarray, np.ndarray] = ExactTimePairs(MAX_UNPAIRED)
+        self._frames: deque[_Frame] = deque()
+        self._ref_queue: deque[tuple[int, np.ndarray, np.ndarray]] = deque()
+        self._camera: PinholeCamera | None = None
+        self._reset: tuple[np.ndarray, int | None] | None = None
+        self._new_config: TrackerConfig | None = None
+        self.params.on_change = self._on_config
+        self.stats = {"frames_in": 0, "frames_tracked": 0, "f2m": 0, "f2f": 0, "dropped_behind": 0,
+                      "dropped_unpaired": 0, "late_references": 0, "bad_inputs": 0}
+
+        inputs = MutuallyExclusiveCallbackGroup()
+        work = MutuallyExclusiveCallbackGroup()
+        self.coarse_pub = self.create_publisher(PoseStamped, COARSE_POSE_TOPIC, SENSOR_QOS)
+        self.pose_pub = self.create_publisher(PoseStamped, TRACKER_POSE_TOPIC, SENSOR_QOS)
+        self.odom_pub = self.create_publisher(Odometry, TRACKER_ODOMETRY_TOPIC, SENSOR_QOS)
+        self.status_pub = self.create_publisher(DiagnosticArray, TRACKER_STATUS_TOPIC, SENSOR_QOS)
+        sub = self.create_subscription
+        sub(Image, COLOR_TOPIC, self._on_color, SENSOR_QOS, callback_group=inputs)
+        sub(Image, DEPTH_TOPIC, self._on_depth, SENSOR_QOS, callback_group=inputs)
+        sub(CameraInfo, COLOR_INFO_TOPIC, self._on_camera_info, SENSOR_QOS, callback_group=inputs)
+        sub(Image, REFERENCE_COLOR_TOPIC, self._on_ref_color, SENSOR_QOS, callback_group=inputs)
+        sub(Image, REFERENCE_DEPTH_TOPIC, self._on_ref_depth, SENSOR_QOS, callback_group=inputs)
+        sub(PoseStamped, TRACKER_RESET_TOPIC, self._on_reset, SENSOR_QOS, callback_group=inputs)
+        self.work_trigger = self.create_guard_condition(self._work, callback_group=work)
+        # the deadline timer only wakes the worker: references already received are handled before deadlines
+        self.deadline_timer = self.create_timer(self._deadline_period(cfg), self.work_trigger.trigger,
+                                                callback_group=work)
+        self.get_logger().info(f"mode {cfg.mode}, reference timeout {cfg.reference_timeout_s} s, start pose "
+                               f"{list(cfg.initial_pose)}; kernels warmed up in {warm_s:.2f} s")
+
+    # ---------------------------------------------------------------------------------------------- helpers
+
+    @staticmethod
+    def _deadline_period(cfg: TrackerConfig) -> float:
+        return min(0.1, max(0.01, cfg.reference_timeout_s / 4))
+
+    def _log(self, level: Level, text: str) -> None:
+        logger = self.get_logger()  # rclpy refuses one call site with several severities: one line each
+        if level == Level.OK:
+            logger.info(text)
+        elif level == Level.WARN:
+            logger.warning(text)
+        else:
+            logger.error(text)
+
+    def _problem(self, key: str, text: str, level: Level = Level.WARN, stamp_ns: int | None = None) -> None:
+        """Bad input or a failed step: throttled log line and a status message; the node carries on."""
+        self.stats["bad_inputs"] += 1
+        self.problems.report(key, text, level)
+        self._publish_status(level, text, {"stamp_ns": stamp_ns, "source": "", "reason": text}, stamp_ns=stamp_ns)
+
+    def _publish_status(self, level: Level, message: str, values: dict[str, Any], *,
+                        stamp_ns: int | None = None) -> None:
+        all_values = {**values, "mode": self.config.mode, "pending": len(self._pending), **self.stats}
+        stamp = self.get_clock().now().nanoseconds if stamp_ns is None else stamp_ns
+        self.status_pub.publish(diagnostic_array(stamp, [diagnostic_status(NODE_NAME, level, message, all_values)]))
+
+    # ---------------------------------------------------------------------------------------------- inputs
+
+    def _on_color(self, msg: Image) -> None:
+        try:
+            stamp, rgb = stamp_to_ns(msg.header.stamp), color_to_numpy(msg)
+        except ConversionError as exc:
+            self._problem("color", f"dropped colour image on {COLOR_TOPIC}: {exc}")
+            return
+        with self._lock:
+            self.stats["frames_in"] += 1
+            self._enqueue_frame(stamp, self._live.add_first(stamp, (rgb, msg.header.frame_id)))
+
+    def _on_depth(self, msg: Image) -> None:
+        try:
+            stamp, depth = stamp_to_ns(msg.header.stamp), depth_to_metres(msg)
+        except ConversionError as exc:
+            self._problem("depth", f"dropped depth image on {DEPTH_TOPIC}: {exc}")
+            return
+        with self._lock:
+            self._enqueue_frame(stamp, self._live.add_second(stamp, depth))
+
+    def _enqueue_frame(self, stamp: int, pair: tuple[tuple[np.ndarray, str], np.ndarray] | None) -> None:
+        self.stats["dropped_unpaired"] = self._live.dropped
+        if pair is None:
+            return
+        (rgb, frame_id), depth = pair
+        self._frames.append(_Frame(stamp, rgb, depth, frame_id, time.monotonic()))
+        while len(self._frames) > MAX_QUEUED:
+            self._frames.popleft()
+            self.stats["dropped_behind"] += 1
+        self.work_trigger.trigger()
+
+    def _on_ref_color(self, msg: Image) -> None:
+        try:
+            stamp, rgb = stamp_to_ns(msg.header.stamp), color_to_numpy(msg)
+        except ConversionError as exc:
+            self._problem("ref_color", f"dropped reference colour on {REFERENCE_COLOR_TOPIC}: {exc}")
+            return
+        with self._lock:
+            self._enqueue_ref(stamp, self._refs.add_first(stamp, rgb))
+
+    def _on_ref_depth(self, msg: Image) -> None:
+        try:
+            stamp, depth = stamp_to_ns(msg.header.stamp), depth_to_metres(msg)
+        except ConversionError as exc:
+            self._problem("ref_depth", f"dropped reference depth on {REFERENCE_DEPTH_TOPIC}: {exc}")
+            return
+        with self._lock:
+            self._enqueue_ref(stamp, self._refs.add_second(stamp, depth))
+
+    def _enqueue_ref(self, stamp: int, pair: tuple[np.ndarray, np.ndarray] | None) -> None:
+        if pair is not None:
+            self._ref_queue.append((stamp, *pair))
+            self.work_trigger.trigger()
+
+    def _on_camera_info(self, msg: CameraInfo) -> None:
+        try:
+            camera = camera_from_camera_info(msg)
+        except ConversionError as exc:
+            self._problem("camera_info", f"ignored {COLOR_INFO_TOPIC}: {exc}")
+            return
+        with self._lock:
+            self._camera = camera
+
+    def _on_reset(self, msg: PoseStamped) -> None:
+        try:
+            T, stamp, frame_id = pose_stamped_to_matrix(msg)
+            if frame_id not in ("", MAP_FRAME):
+                raise ConversionError(f"frame_id {frame_id!r} is not {MAP_FRAME!r}")
+        except ConversionError as exc:
+            self._problem("reset", f"ignored reset on {TRACKER_RESET_TOPIC}: {exc}")
+            return
+        with self._lock:
+            self._reset = (T, stamp or None)
+        self.work_trigger.trigger()
+
+    def _on_config(self, cfg: TrackerConfig) -> None:
+        with self._lock:
+            self._new_config = cfg
+        self.work_trigger.trigger()
+
+    # ---------------------------------------------------------------------------------------------- worker
+
+    def _work(self) -> None:
+        try:
+            self._work_once()
+        except LightfastError as exc:  # a safety net: an unexpected core error must not stop the node
+            self._problem("internal", f"tracking step failed: {exc}", Level.ERROR)
+
+    def _work_once(self) -> None:
+        with self._lock:
+            new_config, self._new_config = self._new_config, None
+            reset, self._reset = self._reset, None
+            refs = list(self._ref_queue)
+            self._ref_queue.clear()
+            frame = self._frames.popleft() if self._frames else None
+            camera = self._camera
+            more = bool(self._frames)
+        if new_config is not None:
+            self._apply_config(new_config)
+        if camera is not None and self.tracker is not None and camera != self.tracker.camera:
+            self._restart("camera_info changed")
+        if reset is not None:
+            self._apply_reset(*reset)
+        for stamp, rgb, depth in refs:
+            self._refine(stamp, rgb, depth)
+        # deadlines only now, with every reference received so far handled; not after tracking a frame, during
+        # which a reference may have arrived that the next call takes first
+        self._finish_overdue()
+        if frame is not None:
+            self._track(frame, camera)
+        if more:
+            self.work_trigger.trigger()  # one frame per call: the other callbacks get their turn in between
+
+    def _apply_config(self, cfg: TrackerConfig) -> None:
+        old, self.config = self.config, cfg
+        self.deadline_timer.timer_period_ns = int(self._deadline_period(cfg) * 1e9)
+        if self.tracker is None:
+            self._start_pose = cfg.T_map_cam_initial if old.initial_pose != cfg.initial_pose else self._start_pose
+            return
+        if any(getattr(old, f) != getattr(cfg, f) for f in _PREPARATION_FIELDS):
+            warm_up(cfg)
+            self._restart("frame preparation options changed")
+        else:
+            self.tracker.config = cfg
+
+    def _restart(self, why: str) -> None:
+        """Finish the waiting frames with their f2f pose and start a new tracker at the newest pose."""
+        self._finish_all(f"f2f ({why})")
+        self.tracker = None
+        if self._last_pose is not None:
+            self._start_pose = self._last_pose
+        self.get_logger().info(f"tracking restarts at the last pose: {why}")
+
+    def _apply_reset(self, T: np.ndarray, stamp: int | None) -> None:
+        if self.tracker is None:
+            self._start_pose = T
+        else:
+            self.tracker.reset(T, stamp_ns=stamp)
+            dropped = [s for s in self._pending if s not in self.tracker.pending_stamps]
+            for s in dropped:
+                del self._pending[s]
+        self._last_pose = T
+        self._publish_status(Level.OK, "tracking reset", {"stamp_ns": stamp, "source": "reset", "reason": ""})
+
+    def _track(self, f: _Frame, camera: PinholeCamera | None) -> None:
+        stamp = f.stamp_ns
+        if camera is None:
+            self._problem("no_camera_info", f"frame {stamp} not tracked: no camera_info on {COLOR_INFO_TOPIC} yet",
+                          stamp_ns=stamp)
+            return
+        if f.rgb.shape[:2] != camera.shape or f.depth_m.shape != camera.shape:
+            self._problem("size", f"frame {stamp} not tracked: colour {f.rgb.shape[1]}x{f.rgb.shape[0]}, depth "
+                          f"{f.depth_m.shape[1]}x{f.depth_m.shape[0]}, camera_info {camera.width}x{camera.height}",
+                          stamp_ns=stamp)
+            return
+        if self.tracker is None:
+            self.tracker = RGBDTracker(camera, config=self.config)
+            self.tracker.reset(self._start_pose)
+        try:
+            est = self.tracker.track_coarse(stamp, f.rgb, f.depth_m)
+        except TrackingError as exc:
+            self._problem("track", f"frame {stamp} not tracked: {exc}", stamp_ns=stamp)
+            return
+        self.stats["frames_tracked"] += 1
+        self._last_pose = est.T_map_cam
+        self._pending[stamp] = _Pending(f.frame_id or OPTICAL_FRAME, f.received, time.monotonic())
+        try:
+            self.coarse_pub.publish(matrix_to_pose_stamped(est.T_map_cam, stamp_ns=stamp, frame_id=MAP_FRAME))
+        except ConversionError as exc:
+            self._problem("publish", f"coarse pose of frame {stamp} not published: {exc}", Level.ERROR, stamp)
+        for s in self.tracker.expired():
+            self._publish_result(self.tracker.skip_reference(
+                s, f"no reference: more than max_pending={self.config.max_pending} frames waiting"))
+
+    def _refine(self, stamp: int, rgb: np.ndarray, depth: np.ndarray) -> None:
+        if self.tracker is None or stamp not in self._pending:
+            self.stats["late_references"] += 1
+            self.problems.report("late", f"reference for frame {stamp} came late or for an unknown frame (ignored)",
+                                 Level.OK)
+            return
+        for s in [s for s in self._pending if s < stamp]:  # references come in order: these lost theirs
+            self._publish_result(self.tracker.skip_reference(s, "no reference (a later frame's reference came)"))
+        try:
+            result = self.tracker.refine(stamp, rgb, depth)
+        except TrackingError as exc:
+            self.problems.report("reference", f"bad reference for frame {stamp}: {exc}")
+            result = self.tracker.skip_reference(stamp, f"bad reference: {exc}")
+        self._publish_result(result)
+
+    def _finish_overdue(self) -> None:
+        if self.tracker is None:
+            return
+        timeout = self.config.reference_timeout_s
+        now = time.monotonic()
+        for s in [s for s, p in self._pending.items() if now - p.coarse_at >= timeout]:
+            self._publish_result(self.tracker.skip_reference(s, f"no reference within {timeout:g} s"))
+
+    def _finish_all(self, reason: str) -> None:
+        if self.tracker is not None:
+            for s in list(self._pending):
+                self._publish_result(self.tracker.skip_reference(s, reason))
+        self._pending.clear()
+
+    def _publish_result(self, r: TrackResult) -> None:
+        p = self._pending.pop(r.stamp_ns)
+        self.stats[r.source] = self.stats.get(r.source, 0) + 1
+        try:
+            self.pose_pub.publish(matrix_to_pose_stamped(r.T_map_cam, stamp_ns=r.stamp_ns, frame_id=MAP_FRAME))
+            self.odom_pub.publish(matrix_to_odometry(r.T_map_cam, stamp_ns=r.stamp_ns, frame_id=MAP_FRAME,
+                                                     child_frame_id=p.frame_id))
+        except ConversionError as exc:
+            self._problem("publish", f"pose of frame {r.stamp_ns} not published: {exc}", Level.ERROR, r.stamp_ns)
+            return
+        latency_ns = self.get_clock().now().nanoseconds - r.stamp_ns
+        values = {
+            "stamp_ns": r.stamp_ns,
+            "source": r.source,
+            "reason": r.reason,
+            **{f"{k}_ms": 1e3 * v for k, v in r.seconds.items()},
+            "f2f_inlier_ratio": r.f2f.inlier_ratio if r.f2f is not None else None,
+            "f2f_converged": r.f2f.converged if r.f2f is not None else None,
+            "f2m_inlier_ratio": r.f2m.inlier_ratio if r.f2m is not None else None,
+            "f2m_converged": r.f2m.converged if r.f2m is not None else None,
+            "latency_ms": 1e-6 * latency_ns,  # node clock (sim time with use_sim_time) minus the image stamp
+            "pipeline_ms": 1e3 * (time.monotonic() - p.received),  # wall time from the paired frame to here
+        }
+        level = Level.OK if r.source == "f2m" else Level.WARN
+        self._publish_status(level, r.source + (f": {r.reason}" if r.reason else ""), values, stamp_ns=r.stamp_ns)
+
+
+def main(args: list[str] | None = None) -> int:
+    use_local_transport()
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = RGBDTrackerNode()
+        rclpy.spin(node)
+    except (LightfastError, ConfigError) as exc:
+        print(f"{NODE_NAME}: error: {exc}", file=sys.stderr)
+        return 1
+    except (KeyboardInterrupt, ExternalShutdownException):  # Ctrl-C, or SIGTERM through rclpy's handler
+        pass
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
+

@@ -1,0 +1,335 @@
+"""daylight_relight_node in-process: image/pose stamp matching in either order, B̂_sun swapped in only for complete
+epochs, bad input (missing camera_info, wrong encoding, NaN pose, chunks of another map) reported without a crash.
+
+The scene helpers here are shared with test_rgbd_tracker_node.py: the tiny window room, the sun through its window,
+live frames rendered with known brightness scales at known poses, and a gamma camera response saved as a file.
+"""
+from __future__ import annotations
+
+from collections import defaultdict
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pytest
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PoseStamped, Vector3Stamped
+from rclpy.executors import Executor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from sensor_msgs.msg import CameraInfo, Image, PointCloud2
+
+from daylight_relight_node.node import CHUNK_QOS, DaylightRelightNode
+from lightfast.camera import PinholeCamera
+from lightfast.daylight.brightness import relit_image
+from lightfast.daylight.crf import CameraResponse, save_crf
+from lightfast.daylight.lighting_map import LightingMap
+from lightfast.daylight.sun_update import sun_radiosity
+from lightfast.geometry import se3_exp
+from lightfast.ros.convert import (
+    camera_info_from_camera,
+    image_to_numpy,
+    matrix_to_pose_stamped,
+    numpy_to_image,
+    numpy_to_pointcloud2,
+    stamp_to_ns,
+)
+from lightfast.ros.diagnostics import Level, diagnostic_level, diagnostic_values
+from lightfast.ros.qos import SENSOR_QOS
+from lightfast.ros.spin import spin_until
+from lightfast.topics import (
+    COARSE_POSE_TOPIC,
+    COLOR_INFO_TOPIC,
+    COLOR_TOPIC,
+    OPTICAL_FRAME,
+    REFERENCE_COLOR_TOPIC,
+    REFERENCE_DEPTH_TOPIC,
+    RELIGHT_STATUS_TOPIC,
+    SCALE_SUN_TOPIC,
+    SUN_CHUNK_TOPIC,
+)
+from sun_update_node.node import CHUNK_DTYPE
+
+S_TRUE = np.array([[800.0, 760.0, 680.0], [60.0, 70.0, 90.0], [30.0, 28.0, 24.0]])  # sun, sky, ground
+T0_S = 1_700_000_000
+TIMEOUT_S = 15.0
+
+
+def look_at(p, forward) -> np.ndarray:
+    z = np.asarray(forward, float) / np.linalg.norm(forward)
+    x = np.cross(z, [0.0, 0.0, 1.0])
+    x /= np.linalg.norm(x)
+    T = np.eye(4)
+    T[:3, :3] = np.stack([x, np.cross(z, x), z], axis=1)
+    T[:3, 3] = p
+    return T
+
+
+@dataclass
+class Scene:
+    lighting_map: Path
+    lmap: LightingMap
+    sun: np.ndarray  # (V, 3) B̂_sun of the scene's sun position
+    crf: CameraResponse
+    crf_file: Path
+    camera: PinholeCamera
+    poses: list[np.ndarray]  # true T_map_cam of the frames
+    frames: list[tuple[np.ndarray, np.ndarray]]  # live (rgb8, depth_m) rendered at the poses
+
+    def render(self, T: np.ndarray, sun: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        comps = {"sun": self.sun if sun is None else sun, "sky": self.lmap.sky_radiosity,
+                 "ground": self.lmap.ground_radiosity}
+        r = relit_image(self.lmap, comps, S_TRUE, T, self.camera, self.crf)
+        return r.rgb8(), r.depth_m
+
+
+def make_scene(lighting_map: Path, directory: Path, num_frames: int = 4) -> Scene:
+    lmap = LightingMap.load(lighting_map)
+    el = np.radians(35.0)
+    sun = sun_radiosity(lmap, np.array([0.0, -np.cos(el), np.sin(el)])).astype(np.float32)  # through the window
+    crf = CameraResponse.from_function(lambda v: (v / 255.0) ** 2.2, exposure_s=0.004, sensitivity=2.5)
+    crf_file = save_crf(crf, directory / "crf.yaml")
+    camera = PinholeCamera(160, 120, 125.0, 125.0, 79.5, 59.5)
+    T0 = look_at([3.5, 4.0, 1.6], [-1.0, -2.0, -0.8])  # towards the south-west corner and the sunlit floor
+    poses = [T0 @ se3_exp([0.01 * i, 0.005 * i, 0.0, 0.0, 0.01 * i, 0.0]) for i in range(num_frames)]
+    scene = Scene(lighting_map, lmap, sun, crf, crf_file, camera, poses, [])
+    scene.frames = [scene.render(T) for T in poses]
+    return scene
+
+
+def stamp(i: int) -> int:
+    return T0_S * 1_000_000_000 + i * 33_000_000
+
+
+def chunk_messages(radiosity: np.ndarray, epoch_ns: int, chunk_vertices: int = 400) -> list[PointCloud2]:
+    msgs = []
+    for first in range(0, len(radiosity), chunk_vertices):
+        part = radiosity[first:first + chunk_vertices]
+        arr = np.empty(len(part), dtype=CHUNK_DTYPE)
+        arr["vertex"] = np.arange(first, first + len(part))
+        arr["r"], arr["g"], arr["b"] = part.T
+        msgs.append(numpy_to_pointcloud2(arr, stamp_ns=epoch_ns, frame_id="map"))
+    return msgs
+
+
+class Probe:
+    """A test node: publishers for the node's inputs, recorders of its outputs (keyed by stamp)."""
+
+    def __init__(self, make_node: Callable[..., Node], executor: Executor, outputs: dict[str, tuple[type, str]],
+                 inputs: dict[str, tuple[type, str]]) -> None:
+        self.executor = executor
+        self.node = make_node("probe")
+        self.pubs = {k: self.node.create_publisher(t, topic, CHUNK_QOS if topic == SUN_CHUNK_TOPIC else SENSOR_QOS)
+                     for k, (t, topic) in inputs.items()}
+        self.got: dict[str, dict[int, object]] = defaultdict(dict)
+        self.status: list[DiagnosticArray] = []
+        self.subs = []
+        for key, (t, topic) in outputs.items():
+            cb = self.status.append if t is DiagnosticArray else self._recorder(key)
+            self.subs.append(self.node.create_subscription(t, topic, cb, SENSOR_QOS))
+
+    def _recorder(self, key: str) -> Callable[[object], None]:
+        def record(msg: object) -> None:
+            self.got[key][stamp_to_ns(msg.header.stamp)] = msg  # type: ignore[attr-defined]
+        return record
+
+    def wait_matched(self) -> None:
+        assert spin_until(self.executor, lambda: all(p.get_subscription_count() > 0 for p in self.pubs.values())
+                          and all(s.get_publisher_count() > 0 for s in self.subs), TIMEOUT_S)
+
+    def spin_until(self, predicate: Callable[[], bool], timeout_s: float = TIMEOUT_S) -> bool:
+        return spin_until(self.executor, predicate, timeout_s)
+
+    def publish(self, key: str, msg: object) -> None:
+        self.pubs[key].publish(msg)
+
+    def statuses(self) -> list[tuple[Level, str, dict[str, str]]]:
+        return [(diagnostic_level(s), s.message, diagnostic_values(s)) for a in self.status for s in a.status]
+
+    def wait_status(self, predicate: Callable[[Level, str, dict[str, str]], bool],
+                    timeout_s: float = TIMEOUT_S) -> tuple[Level, str, dict[str, str]]:
+        def found() -> tuple[Level, str, dict[str, str]] | None:
+            return next((s for s in self.statuses() if predicate(*s)), None)
+        assert self.spin_until(lambda: found() is not None, timeout_s), self.statuses()[-5:]
+        result = found()
+        assert result is not None
+        return result
+
+
+@pytest.fixture(scope="module")
+def scene(tiny_lighting_map: Path, tmp_path_factory: pytest.TempPathFactory) -> Scene:
+    return make_scene(tiny_lighting_map, tmp_path_factory.mktemp("relight_scene"))
+
+
+RELIGHT_INPUTS = {"image": (Image, COLOR_TOPIC), "info": (CameraInfo, COLOR_INFO_TOPIC),
+                  "pose": (PoseStamped, COARSE_POSE_TOPIC), "chunk": (PointCloud2, SUN_CHUNK_TOPIC)}
+RELIGHT_OUTPUTS = {"color": (Image, REFERENCE_COLOR_TOPIC), "depth": (Image, REFERENCE_DEPTH_TOPIC),
+                   "sun_scale": (Vector3Stamped, SCALE_SUN_TOPIC), "status": (DiagnosticArray, RELIGHT_STATUS_TOPIC)}
+
+
+@pytest.fixture
+def relight(scene: Scene, executor: Executor, make_node: Callable[..., Node]):
+    """``relight(**params) -> (node, probe)``: the node on the test executor and a matched probe."""
+    nodes = []
+
+    def start(**params: object) -> tuple[DaylightRelightNode, Probe]:
+        overrides = [Parameter("lighting_map", value=str(scene.lighting_map)),
+                     Parameter("crf_file", value=str(scene.crf_file))]
+        overrides += [Parameter(k, value=v) for k, v in params.items()]
+        node = DaylightRelightNode(context=executor.context, parameter_overrides=overrides)
+        executor.add_node(node)
+        nodes.append(node)
+        probe = Probe(make_node, executor, RELIGHT_OUTPUTS, RELIGHT_INPUTS)
+        probe.wait_matched()
+        return node, probe
+
+    yield start
+    for node in nodes:
+        executor.remove_node(node)
+        node.destroy_node()
+
+
+def image_msg(scene: Scene, i: int, rgb: np.ndarray | None = None) -> Image:
+    return numpy_to_image(scene.frames[i][0] if rgb is None else rgb, "rgb8", stamp_ns=stamp(i),
+                          frame_id=OPTICAL_FRAME)
+
+
+def pose_msg(scene: Scene, i: int) -> PoseStamped:
+    return matrix_to_pose_stamped(scene.poses[i], stamp_ns=stamp(i), frame_id="map")
+
+
+def send_epoch(probe: Probe, radiosity: np.ndarray, epoch_ns: int, parts: slice = slice(None)) -> int:
+    msgs = chunk_messages(radiosity, epoch_ns)[parts]
+    for m in msgs:
+        probe.publish("chunk", m)
+    return len(msgs)
+
+
+def test_reference_for_image_and_pose_in_either_order(relight, scene: Scene) -> None:
+    node, probe = relight(window=1)
+    probe.publish("info", camera_info_from_camera(scene.camera, stamp_ns=stamp(0), frame_id=OPTICAL_FRAME))
+    send_epoch(probe, scene.sun, stamp(0))
+    probe.wait_status(lambda lvl, msg, v: v.get("sun_epoch_ns") == str(stamp(0)))
+
+    # image first, then its pose
+    probe.publish("image", image_msg(scene, 1))
+    assert probe.spin_until(lambda: node.stats["frames_in"] == 1)
+    assert not probe.got["color"]
+    probe.publish("pose", pose_msg(scene, 1))
+    assert probe.spin_until(lambda: stamp(1) in probe.got["color"] and stamp(1) in probe.got["depth"]
+                            and stamp(1) in probe.got["sun_scale"])
+    # pose first, then its image
+    probe.publish("pose", pose_msg(scene, 2))
+    assert probe.spin_until(lambda: node.stats["poses_in"] == 2)
+    assert stamp(2) not in probe.got["color"]
+    probe.publish("image", image_msg(scene, 2))
+    assert probe.spin_until(lambda: stamp(2) in probe.got["color"] and stamp(2) in probe.got["depth"]
+                            and stamp(2) in probe.got["sun_scale"])
+
+    for i in (1, 2):
+        color_msg, depth_msg = probe.got["color"][stamp(i)], probe.got["depth"][stamp(i)]
+        assert (color_msg.encoding, depth_msg.encoding) == ("rgb8", "32FC1")
+        assert color_msg.header.frame_id == depth_msg.header.frame_id == OPTICAL_FRAME
+        color, depth = image_to_numpy(color_msg), image_to_numpy(depth_msg)
+        live_rgb, live_depth = scene.frames[i]
+        # rendered at the true pose with the scales estimated from the live image: the live image again
+        assert np.mean(np.abs(color.astype(int) - live_rgb)) < 2.0
+        hit = live_depth > 0
+        np.testing.assert_allclose(depth[hit], live_depth[hit], atol=1e-4)
+        s = probe.got["sun_scale"][stamp(i)].vector
+        np.testing.assert_allclose([s.x, s.y, s.z], S_TRUE[0], rtol=0.05)
+    level, _, values = probe.wait_status(lambda lvl, msg, v: v.get("stamp_ns") == str(stamp(2))
+                                         and msg == "reference published")
+    assert level == Level.OK and int(values["pixels_used"]) > 20
+    assert float(values["render_ms"]) > 0 and float(values["estimate_ms"]) > 0
+
+
+def test_sun_epoch_swapped_in_only_when_complete(relight, scene: Scene) -> None:
+    node, probe = relight(window=1)
+    probe.publish("info", camera_info_from_camera(scene.camera, stamp_ns=stamp(0), frame_id=OPTICAL_FRAME))
+
+    def frame(i: int) -> None:  # the same live image and pose under new stamps
+        probe.publish("image", numpy_to_image(scene.frames[0][0], "rgb8", stamp_ns=stamp(i), frame_id=OPTICAL_FRAME))
+        probe.publish("pose", matrix_to_pose_stamped(scene.poses[0], stamp_ns=stamp(i), frame_id="map"))
+
+    def waiting(i: int) -> dict[str, str]:
+        level, message, values = probe.wait_status(lambda lvl, msg, v: v.get("stamp_ns") == str(stamp(i)))
+        assert level == Level.WARN and "waiting" in message
+        return values
+
+    def reference(i: int) -> np.ndarray:
+        assert probe.spin_until(lambda: stamp(i) in probe.got["color"] and stamp(i) in probe.got["sun_scale"])
+        return image_to_numpy(probe.got["color"][stamp(i)])
+
+    epoch1, epoch2 = stamp(100), stamp(200)
+    frame(1)  # no chunks at all
+    waiting(1)
+    n = send_epoch(probe, scene.sun, epoch1, slice(0, 2))  # a partial first epoch
+    assert probe.spin_until(lambda: node.stats["chunks"] == n)
+    frame(2)
+    values = waiting(2)
+    assert values["pending_epoch_ns"] == str(epoch1) and 0 < float(values["chunk_progress"]) < 1
+    send_epoch(probe, scene.sun, epoch1, slice(2, None))
+    probe.wait_status(lambda lvl, msg, v: v.get("sun_epoch_ns") == str(epoch1))
+    frame(3)
+    ref1 = reference(3)
+    assert not probe.got["color"].keys() & {stamp(1), stamp(2)}  # nothing before the first complete epoch
+
+    # a newer epoch with the sunlight elsewhere: while partial, the output is unchanged
+    sun2 = (0.5 * scene.sun + 0.2 * np.roll(scene.sun, 200, axis=0)).astype(np.float32)
+    m = send_epoch(probe, sun2, epoch2, slice(0, 2))
+    total = len(chunk_messages(scene.sun, epoch1))
+    assert probe.spin_until(lambda: node.stats["chunks"] == total + m)
+    frame(4)
+    ref_partial = reference(4)
+    assert np.max(np.abs(ref_partial.astype(int) - ref1)) <= 1
+    _, _, values = probe.wait_status(lambda lvl, msg, v: v.get("stamp_ns") == str(stamp(4)))
+    assert values["sun_epoch_ns"] == str(epoch1) and values["pending_epoch_ns"] == str(epoch2)
+    # once complete it is swapped in
+    send_epoch(probe, sun2, epoch2, slice(2, None))
+    probe.wait_status(lambda lvl, msg, v: v.get("sun_epoch_ns") == str(epoch2))
+    frame(5)
+    ref2 = reference(5)
+    assert np.mean(np.abs(ref2.astype(int) - ref1)) > 2.0
+    s1, s2 = probe.got["sun_scale"][stamp(3)].vector, probe.got["sun_scale"][stamp(5)].vector
+    assert abs(s2.x - s1.x) > 0.1 * s1.x
+
+
+def test_bad_inputs_are_reported_and_the_node_keeps_running(relight, scene: Scene) -> None:
+    node, probe = relight(window=1)
+    send_epoch(probe, scene.sun, stamp(0))
+    probe.wait_status(lambda lvl, msg, v: v.get("sun_epoch_ns") == str(stamp(0)))
+
+    # an image before any camera_info
+    probe.publish("image", image_msg(scene, 1))
+    probe.publish("pose", pose_msg(scene, 1))
+    level, message, _ = probe.wait_status(lambda lvl, msg, v: "camera_info" in msg)
+    assert level == Level.WARN and "no camera_info" in message
+    # wrong encoding, NaN pose, chunks of another (bigger) map
+    bgr = numpy_to_image(scene.frames[1][0], "bgr8", stamp_ns=stamp(2), frame_id=OPTICAL_FRAME)
+    probe.publish("image", bgr)
+    probe.wait_status(lambda lvl, msg, v: "encoding 'bgr8'" in msg)
+    nan_pose = pose_msg(scene, 2)
+    nan_pose.pose.position.x = float("nan")
+    probe.publish("pose", nan_pose)
+    probe.wait_status(lambda lvl, msg, v: "coarse pose" in msg and "not finite" in msg)
+    big = np.ones((scene.lmap.num_vertices + 500, 3), dtype=np.float32)
+    probe.publish("chunk", chunk_messages(big, stamp(50), chunk_vertices=len(big))[0])
+    level, message, _ = probe.wait_status(lambda lvl, msg, v: "sun chunk" in msg)
+    assert level == Level.ERROR and "another lighting map" in message
+    # camera_info of another size than the images
+    probe.publish("info", camera_info_from_camera(scene.camera.scaled(0.5), frame_id=OPTICAL_FRAME))
+    assert probe.spin_until(lambda: node._camera is not None)
+    probe.publish("image", image_msg(scene, 3))
+    probe.publish("pose", pose_msg(scene, 3))
+    probe.wait_status(lambda lvl, msg, v: "camera_info says 80x60" in msg)
+    assert not probe.got["color"]
+
+    # good data again: a reference, from the epoch that was complete all along
+    probe.publish("info", camera_info_from_camera(scene.camera, frame_id=OPTICAL_FRAME))
+    assert probe.spin_until(lambda: node._camera == scene.camera)
+    probe.publish("pose", pose_msg(scene, 1))
+    probe.publish("image", image_msg(scene, 1))
+    assert probe.spin_until(lambda: stamp(1) in probe.got["color"])
+    assert node.relighter.sun_epoch_ns == stamp(0)

@@ -1,0 +1,232 @@
+"""rgbd_tracker_node in-process: colour/depth pairing in either order, f2f pose when no reference comes, f2m refinement
+against a reference, reset, bad input without a crash, and the two daylight nodes tracking together."""
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import pytest
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PoseStamped
+from nav_msgs.msg import Odometry
+from rclpy.executors import Executor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from sensor_msgs.msg import CameraInfo, Image, PointCloud2
+
+from daylight_relight_node.node import DaylightRelightNode
+from lightfast.geometry import matrix_to_quat, rotation_angle_deg, se3_exp
+from lightfast.ros.convert import (
+    camera_info_from_camera,
+    matrix_to_pose_stamped,
+    numpy_to_image,
+    odometry_to_matrix,
+    pose_stamped_to_matrix,
+)
+from lightfast.ros.diagnostics import Level
+from lightfast.topics import (
+    COARSE_POSE_TOPIC,
+    COLOR_INFO_TOPIC,
+    COLOR_TOPIC,
+    DEPTH_TOPIC,
+    OPTICAL_FRAME,
+    REFERENCE_COLOR_TOPIC,
+    REFERENCE_DEPTH_TOPIC,
+    RELIGHT_STATUS_TOPIC,
+    SUN_CHUNK_TOPIC,
+    TRACKER_ODOMETRY_TOPIC,
+    TRACKER_POSE_TOPIC,
+    TRACKER_RESET_TOPIC,
+    TRACKER_STATUS_TOPIC,
+)
+from rgbd_tracker_node.node import RGBDTrackerNode
+from test.ros.test_daylight_relight_node import Probe, Scene, chunk_messages, make_scene, stamp
+
+TRACKER_INPUTS = {"image": (Image, COLOR_TOPIC), "depth": (Image, DEPTH_TOPIC), "info": (CameraInfo, COLOR_INFO_TOPIC),
+                  "ref_color": (Image, REFERENCE_COLOR_TOPIC), "ref_depth": (Image, REFERENCE_DEPTH_TOPIC),
+                  "reset": (PoseStamped, TRACKER_RESET_TOPIC)}
+TRACKER_OUTPUTS = {"coarse": (PoseStamped, COARSE_POSE_TOPIC), "pose": (PoseStamped, TRACKER_POSE_TOPIC),
+                   "odom": (Odometry, TRACKER_ODOMETRY_TOPIC), "status": (DiagnosticArray, TRACKER_STATUS_TOPIC)}
+
+
+@pytest.fixture(scope="module")
+def scene(tiny_lighting_map: Path, tmp_path_factory: pytest.TempPathFactory) -> Scene:
+    return make_scene(tiny_lighting_map, tmp_path_factory.mktemp("tracker_scene"), num_frames=4)
+
+
+def pose7(T: np.ndarray) -> list[float]:
+    return [*map(float, T[:3, 3]), *map(float, matrix_to_quat(T[:3, :3]))]
+
+
+def errors(T: np.ndarray, T_true: np.ndarray) -> tuple[float, float]:
+    """(translation error m, rotation error deg)."""
+    return float(np.linalg.norm(T[:3, 3] - T_true[:3, 3])), float(rotation_angle_deg(T[:3, :3], T_true[:3, :3]))
+
+
+def pose_of(msg: PoseStamped) -> np.ndarray:
+    return pose_stamped_to_matrix(msg)[0]
+
+
+@pytest.fixture
+def start_nodes(scene: Scene, executor: Executor, make_node: Callable[..., Node]):
+    """``start_nodes(tracker_params, relight_params=None) -> (tracker, relight or None, probe)``."""
+    nodes: list[Node] = []
+
+    def start(tracker: dict, relight: dict | None = None):
+        overrides = [Parameter(k, value=v) for k, v in tracker.items()]
+        tracker_node = RGBDTrackerNode(context=executor.context, parameter_overrides=overrides)
+        executor.add_node(tracker_node)
+        nodes.append(tracker_node)
+        relight_node = None
+        inputs, outputs = dict(TRACKER_INPUTS), dict(TRACKER_OUTPUTS)
+        if relight is not None:
+            params = {"lighting_map": str(scene.lighting_map), "crf_file": str(scene.crf_file), **relight}
+            relight_node = DaylightRelightNode(context=executor.context,
+                                               parameter_overrides=[Parameter(k, value=v) for k, v in params.items()])
+            executor.add_node(relight_node)
+            nodes.append(relight_node)
+            for key in ("ref_color", "ref_depth", "reset"):
+                del inputs[key]
+            inputs["chunk"] = (PointCloud2, SUN_CHUNK_TOPIC)
+            outputs["relight_status"] = (DiagnosticArray, RELIGHT_STATUS_TOPIC)
+        probe = Probe(make_node, executor, outputs, inputs)
+        probe.wait_matched()
+        if relight_node is not None:  # the two nodes see each other
+            assert probe.spin_until(lambda: relight_node.color_pub.get_subscription_count() > 0
+                                    and tracker_node.coarse_pub.get_subscription_count() > 1)
+        return tracker_node, relight_node, probe
+
+    yield start
+    for node in nodes:
+        executor.remove_node(node)
+        node.destroy_node()
+
+
+def send_frame(probe: Probe, scene: Scene, i: int, *, depth_first: bool = False, millimetres: bool = False,
+               at: int | None = None) -> None:
+    rgb, depth = scene.frames[i]
+    s = stamp(i if at is None else at)
+    if millimetres:
+        depth_msg = numpy_to_image(np.rint(depth * 1000).astype(np.uint16), "16UC1", stamp_ns=s, frame_id=OPTICAL_FRAME)
+    else:
+        depth_msg = numpy_to_image(depth, "32FC1", stamp_ns=s, frame_id=OPTICAL_FRAME)
+    color_msg = numpy_to_image(rgb, "rgb8", stamp_ns=s, frame_id=OPTICAL_FRAME)
+    for key, msg in ([("depth", depth_msg), ("image", color_msg)] if depth_first else
+                     [("image", color_msg), ("depth", depth_msg)]):
+        probe.publish(key, msg)
+
+
+def final_status(probe: Probe, i: int) -> tuple[Level, str, dict[str, str]]:
+    return probe.wait_status(lambda lvl, msg, v: v.get("stamp_ns") == str(stamp(i)) and v.get("source") in
+                             ("f2f", "f2m"))
+
+
+def test_missing_reference_gives_the_f2f_pose_and_says_so(start_nodes, scene: Scene) -> None:
+    _, _, probe = start_nodes({"initial_pose": pose7(scene.poses[0]), "reference_timeout_s": 0.2,
+                               "mode": "no-color-f2m"})
+    probe.publish("info", camera_info_from_camera(scene.camera, frame_id=OPTICAL_FRAME))
+    for i in range(3):  # colour first, then depth first (as 16UC1 millimetres)
+        send_frame(probe, scene, i, depth_first=bool(i % 2), millimetres=bool(i % 2))
+        assert probe.spin_until(lambda i=i: stamp(i) in probe.got["pose"])
+        level, message, values = final_status(probe, i)
+        assert level == Level.WARN and values["source"] == "f2f" and "no reference within 0.2 s" in message
+        assert values["mode"] == "no-color-f2m" and values["f2m_inlier_ratio"] == ""
+        coarse, final = pose_of(probe.got["coarse"][stamp(i)]), pose_of(probe.got["pose"][stamp(i)])
+        np.testing.assert_allclose(final, coarse, atol=1e-9)  # the f2f pose is final
+        dt, dr = errors(final, scene.poses[i])
+        assert dt < 0.005 and dr < 0.3, (i, dt, dr)
+        if i:
+            assert float(values["f2f_inlier_ratio"]) > 0.5 and float(values["f2f_ms"]) > 0
+        odom = probe.got["odom"][stamp(i)]
+        T, _, frame_id, child = odometry_to_matrix(odom)
+        assert (frame_id, child) == ("map", OPTICAL_FRAME)
+        np.testing.assert_allclose(T, final, atol=1e-9)
+    assert probe.got["coarse"][stamp(0)].header.frame_id == "map"
+    np.testing.assert_allclose(pose_of(probe.got["coarse"][stamp(0)]), scene.poses[0], atol=1e-6)  # initial_pose
+
+
+def test_reference_refines_the_coarse_pose(start_nodes, scene: Scene) -> None:
+    start = scene.poses[0] @ se3_exp([0.015, -0.01, 0.005, 0.0, 0.01, 0.0])  # 1.9 cm, 0.6 deg off
+    _, _, probe = start_nodes({"initial_pose": pose7(start), "reference_timeout_s": 10.0})
+    probe.publish("info", camera_info_from_camera(scene.camera, frame_id=OPTICAL_FRAME))
+    for i in range(2):
+        send_frame(probe, scene, i, depth_first=bool(i % 2))
+        assert probe.spin_until(lambda i=i: stamp(i) in probe.got["coarse"])
+        T_coarse = pose_of(probe.got["coarse"][stamp(i)])
+        ref_rgb, ref_depth = scene.render(T_coarse)  # what daylight_relight_node renders at T≈
+        ref = {"ref_color": numpy_to_image(ref_rgb, "rgb8", stamp_ns=stamp(i), frame_id=OPTICAL_FRAME),
+               "ref_depth": numpy_to_image(ref_depth, "32FC1", stamp_ns=stamp(i), frame_id=OPTICAL_FRAME)}
+        for key in (["ref_depth", "ref_color"] if i % 2 else ["ref_color", "ref_depth"]):  # either order
+            assert stamp(i) not in probe.got["pose"]
+            probe.publish(key, ref[key])
+        assert probe.spin_until(lambda i=i: stamp(i) in probe.got["pose"])
+        level, message, values = final_status(probe, i)
+        assert (level, message, values["source"], values["reason"]) == (Level.OK, "f2m", "f2m", "")
+        assert float(values["f2m_inlier_ratio"]) > 0.5 and float(values["f2m_ms"]) > 0
+        dt, dr = errors(pose_of(probe.got["pose"][stamp(i)]), scene.poses[i])
+        assert dt < 0.003 and dr < 0.2, (i, dt, dr)
+    assert errors(pose_of(probe.got["coarse"][stamp(0)]), scene.poses[0])[0] > 0.015  # the start was off
+
+
+def test_bad_input_is_reported_and_tracking_resumes(start_nodes, scene: Scene) -> None:
+    tracker, _, probe = start_nodes({"initial_pose": pose7(scene.poses[0]), "reference_timeout_s": 0.05})
+    rgb, depth = scene.frames[0]
+
+    def problem(text: str) -> str:
+        return probe.wait_status(lambda lvl, msg, v: text in msg and lvl != Level.OK)[1]
+
+    send_frame(probe, scene, 0)  # before any camera_info
+    assert "no camera_info" in problem("camera_info")
+    probe.publish("info", camera_info_from_camera(scene.camera, frame_id=OPTICAL_FRAME))
+    probe.publish("depth", numpy_to_image(depth.astype(np.uint8), "8UC1", stamp_ns=stamp(0)))
+    problem("depth image encoding '8UC1'")
+    probe.publish("image", numpy_to_image(rgb, "rgb8", stamp_ns=stamp(0)))  # colour/depth sizes differ
+    probe.publish("depth", numpy_to_image(depth[::2, ::2].copy(), "32FC1", stamp_ns=stamp(0)))
+    problem("colour 160x120, depth 80x60")
+    probe.publish("image", numpy_to_image(rgb, "rgb8", stamp_ns=stamp(0)))  # no valid depth
+    probe.publish("depth", numpy_to_image(np.full_like(depth, np.nan), "32FC1", stamp_ns=stamp(0)))
+    problem("no valid depth")
+    bad_reset = matrix_to_pose_stamped(scene.poses[0], stamp_ns=0, frame_id="map")
+    bad_reset.pose.orientation.w = float("nan")
+    probe.publish("reset", bad_reset)
+    problem("ignored reset")
+    assert not probe.got["coarse"]
+
+    send_frame(probe, scene, 1)  # good data: tracking starts at initial_pose
+    assert probe.spin_until(lambda: stamp(1) in probe.got["pose"])
+    np.testing.assert_allclose(pose_of(probe.got["pose"][stamp(1)]), scene.poses[0], atol=1e-6)
+    # a reset puts the next frame at the given pose
+    reset_to = scene.poses[2] @ se3_exp([0.0, 0.0, 0.05, 0.0, 0.0, 0.0])
+    probe.publish("reset", matrix_to_pose_stamped(reset_to, stamp_ns=0, frame_id="map"))
+    probe.wait_status(lambda lvl, msg, v: msg == "tracking reset")
+    send_frame(probe, scene, 2)
+    assert probe.spin_until(lambda: stamp(2) in probe.got["pose"])
+    np.testing.assert_allclose(pose_of(probe.got["coarse"][stamp(2)]), reset_to, atol=1e-6)
+    # a frame out of order is refused, the next one is tracked from frame 2
+    send_frame(probe, scene, 1, at=1)
+    problem("is not after the previous frame")
+    send_frame(probe, scene, 3)
+    assert probe.spin_until(lambda: stamp(3) in probe.got["pose"])
+    rel_true = np.linalg.inv(scene.poses[2]) @ scene.poses[3]
+    rel = np.linalg.inv(pose_of(probe.got["pose"][stamp(2)])) @ pose_of(probe.got["pose"][stamp(3)])
+    assert errors(rel, rel_true)[0] < 0.003
+    assert tracker.stats["bad_inputs"] >= 6
+
+
+def test_relight_and_tracker_nodes_track_together(start_nodes, scene: Scene) -> None:
+    start = scene.poses[0] @ se3_exp([0.01, 0.01, -0.005, 0.005, 0.0, 0.0])  # 1.5 cm, 0.3 deg off
+    _, relight, probe = start_nodes({"initial_pose": pose7(start), "reference_timeout_s": 10.0}, {})
+    probe.publish("info", camera_info_from_camera(scene.camera, frame_id=OPTICAL_FRAME))
+    for msg in chunk_messages(scene.sun, stamp(0)):
+        probe.publish("chunk", msg)
+    assert probe.spin_until(lambda: relight.relighter.ready)
+    for i in range(len(scene.frames)):
+        send_frame(probe, scene, i, depth_first=bool(i % 2))
+        assert probe.spin_until(lambda i=i: stamp(i) in probe.got["pose"])
+        level, message, values = final_status(probe, i)
+        assert (level, values["source"]) == (Level.OK, "f2m"), message
+        dt, dr = errors(pose_of(probe.got["pose"][stamp(i)]), scene.poses[i])
+        assert dt < 0.005 and dr < 0.3, (i, dt, dr)
+    assert errors(pose_of(probe.got["coarse"][stamp(0)]), scene.poses[0])[0] > 0.01  # f2m did the correcting
+    assert relight.stats["references"] == len(scene.frames)
