@@ -63,6 +63,7 @@ def _cmd_bag_play(args: argparse.Namespace) -> int:
         clock_hz=args.clock or 0.0,
         topics=tuple(args.topics or ()),
         start_offset_s=args.start_offset,
+        preroll_s=args.preroll,
         wait_for_subscribers_s=args.wait_for_subscribers or 0.0,
         ack_timeout_s=args.ack_timeout,
         qos_depth=args.qos_depth,
@@ -112,6 +113,23 @@ def _cmd_bag_compare(args: argparse.Namespace) -> int:
 
 
 # --- data, config, dds ----------------------------------------------------------------------------------------
+
+def _cmd_bag_pose(args: argparse.Namespace) -> int:
+    from lightfast.bag import open_bag
+    from lightfast.geometry import matrix_to_quat
+    from lightfast.ros.convert import pose_stamped_to_matrix
+
+    with open_bag(args.bag) as bag:
+        if args.topic not in bag.select_topics(None):
+            raise LightfastError(f"{args.bag}: no topic {args.topic}")
+        for i, m in enumerate(bag.messages(topics=[args.topic])):
+            if i == args.index:
+                T = pose_stamped_to_matrix(bag.deserialize(m))[0]
+                values = [*T[:3, 3], *matrix_to_quat(T[:3, :3])]
+                print("[" + ", ".join(f"{v:.9g}" for v in values) + "]")
+                return 0
+    raise LightfastError(f"{args.bag}: {args.topic} has no message {args.index}")
+
 
 def _cmd_data_7scenes(args: argparse.Namespace) -> int:
     from lightfast.data.sevenscenes import convert_7scenes
@@ -220,6 +238,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="publish /clock for use_sim_time, at VALUE Hz (default 40) and before every message")
     p.add_argument("--topics", nargs="+", metavar="TOPIC", help="play only these topics")
     p.add_argument("--start-offset", type=float, default=0.0, metavar="SECONDS", help="skip the first SECONDS")
+    p.add_argument("--preroll", type=float, default=0.0, metavar="SECONDS",
+                   help="with --clock: run /clock from SECONDS before the first message first (nodes get ready)")
     p.add_argument("--wait-for-subscribers", **_optional_float(10.0),
                    help="wait up to VALUE s (default 10) until every topic has a subscriber")
     p.add_argument("--ack-timeout", type=float, default=30.0, metavar="SECONDS",
@@ -245,6 +265,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("other", help="the bag to check (e.g. what was recorded)")
     p.add_argument("--topics", nargs="+", metavar="TOPIC", help="compare only these topics")
     p.set_defaults(func=_cmd_bag_compare)
+
+    p = bag_sub.add_parser("pose", help="print one PoseStamped of a bag as [x, y, z, qx, qy, qz, qw] (e.g. for "
+                           "the tracker's initial_pose parameter)")
+    p.add_argument("bag", help="bag directory, or its .mcap/.db3 file")
+    p.add_argument("--topic", default="/ground_truth/pose", help="PoseStamped topic (default /ground_truth/pose)")
+    p.add_argument("--index", type=int, default=0, help="message index on that topic (default 0, the first)")
+    p.set_defaults(func=_cmd_bag_pose)
 
     data = sub.add_parser("data", help="convert public datasets into bags")
     data_sub = data.add_subparsers(dest="data_command", required=True, metavar="DATASET")
@@ -294,6 +321,8 @@ def build_parser() -> argparse.ArgumentParser:
     ev_sub = ev.add_subparsers(dest="eval_command", required=True, metavar="EVALUATION")
     _add_passthrough(ev_sub, "daylight", "lightfast.eval.daylight:main_eval_daylight",
                      "Table I: the tracker and its ablations on the daylight recordings (see `eval daylight --help`)")
+    _add_passthrough(ev_sub, "recording", "lightfast.eval.recording:main_eval_recording",
+                     "score a recorded live run of the tracking nodes against the played bag's ground truth")
 
     dds = sub.add_parser("dds", help="DDS transport settings")
     dds_sub = dds.add_subparsers(dest="dds_command", required=True, metavar="DDS_COMMAND")

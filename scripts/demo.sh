@@ -1,25 +1,44 @@
 #!/usr/bin/env bash
-# The main job, launch-free: set up, convert the real 7-Scenes frames into an MCAP bag (once), replay it live in
-# one process while another records it, then print one summary line per stage (what was played; what arrived:
-# counts, rates, drops). Ctrl-C stops every process this script started.
+# The main job, launch-free: set up; generate (or reuse) a short simulated daylight recording and its lighting map;
+# start sun_update_node, daylight_relight_node and rgbd_tracker_node as separate processes on sim time; replay the
+# recording with /clock while `lightfast bag record` records what the nodes publish; then print RMSE, tracking loss,
+# throughput, latency and the per-stage timings (paper Table II). Ctrl-C stops every process this script started.
 #
-# Environment: LIGHTFAST_SHARED (default ../shared beside the checkout), LIGHTFAST_OUT (default ./out),
-# ROS_DOMAIN_ID (default: a random id), RATE (playback rate, default 1 = real time; 0 = as fast as possible).
+# Environment (all optional):
+#   LIGHTFAST_OUT    output directory (default ./out)
+#   SEQUENCE         recording to simulate (default DS1.T6, cloudy: the brightness changes while you watch)
+#   FRAMES           frames to simulate at 30 Hz (default 300)
+#   SIZE             image size WxH (default 320x240)
+#   RESOLUTION       scene mesh resolution in metres (default 0.04: a quick first run)
+#   MODE             tracker mode: proposed | refl-f2m | depth-only | no-color-f2m (default proposed)
+#   RATE             playback rate (default 1 = real time)
+#   ROS_DOMAIN_ID    DDS domain (default: a random id)
 set -euo pipefail
 root=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 bash "$root/scripts/setup.sh"
-lf="$root/.venv/bin/lightfast"
-shared=${LIGHTFAST_SHARED:-$root/../shared}
+bin="$root/.venv/bin"
+lf="$bin/lightfast"
 out=${LIGHTFAST_OUT:-$root/out}
-export ROS_DOMAIN_ID=${ROS_DOMAIN_ID:-$(( (RANDOM % 200) + 20 ))}
+sequence=${SEQUENCE:-DS1.T6}
+frames=${FRAMES:-300}
+size=${SIZE:-320x240}
+resolution=${RESOLUTION:-0.04}
+mode=${MODE:-proposed}
 rate=${RATE:-1}
+export ROS_DOMAIN_ID=${ROS_DOMAIN_ID:-$(( (RANDOM % 200) + 20 ))}
+sim="$out/daylight-sim-$size-$frames-$resolution"
+scene=${sequence%%.*}
+seq_dir="$sim/$sequence"
+map="$sim/maps/$scene"
 mkdir -p "$out"
 
-bag="$out/7scenes_redkitchen_300"
-if [ ! -f "$bag/metadata.yaml" ]; then
-  echo "== converting $shared/data/7scenes_redkitchen_300 to $bag"
-  "$lf" data 7scenes "$shared/data/7scenes_redkitchen_300" "$bag"
+echo "== recording $sequence ($frames frames, $size) in $sim (reused when complete)"
+"$lf" sim daylight "$sim" --sequences "$sequence" --frames "$frames" --size "$size" --resolution "$resolution"
+if [ ! -f "$map/metadata.json" ]; then
+  echo "== preparing the lighting map of $scene in $map"
+  "$lf" daylight prepare "$sim/scenes/$scene.ply" "$sim/scenes/$scene.site.yaml" "$map"
 fi
+initial_pose=$("$lf" bag pose "$seq_dir/bag")  # the evaluation protocol's known start pose
 
 pids=()
 cleanup() {
@@ -31,19 +50,34 @@ cleanup() {
 trap cleanup EXIT
 trap 'echo "interrupted"; exit 130' INT TERM
 
-recorded="$out/demo-recording"
-topics=(/camera/color/image_raw /camera/color/camera_info /camera/depth/image_raw /camera/depth/camera_info
-        /ground_truth/pose)
-echo "== recording ${#topics[@]} topics to $recorded (domain $ROS_DOMAIN_ID)"
-"$lf" bag record --overwrite -o "$recorded" "${topics[@]}" &
+logs="$out/demo-logs"
+mkdir -p "$logs"
+echo "== starting the nodes (domain $ROS_DOMAIN_ID, logs in $logs)"
+"$bin/sun_update_node" --ros-args -p use_sim_time:=true -p lighting_map:="$map" -p update_period_s:=60.0 \
+  >"$logs/sun_update_node.log" 2>&1 &
 pids+=($!)
-recorder=$!
+"$bin/daylight_relight_node" --ros-args -p use_sim_time:=true -p lighting_map:="$map" \
+  -p crf_file:="$seq_dir/camera.yaml" -p reference:="$([ "$mode" = refl-f2m ] && echo reflectance || echo relit)" \
+  >"$logs/daylight_relight_node.log" 2>&1 &
+pids+=($!)
+"$bin/rgbd_tracker_node" --ros-args -p use_sim_time:=true -p mode:="$mode" -p initial_pose:="$initial_pose" \
+  >"$logs/rgbd_tracker_node.log" 2>&1 &
+pids+=($!)
 
-echo "== playing $bag at rate $rate"
-"$lf" bag play "$bag" --rate "$rate" --wait-for-subscribers 20
+recorded="$out/demo-output"
+topics=(/tracker/pose /tracker/coarse_pose /tracker/odometry /tracker/status /relight/status
+        /relight/scale/sun /relight/scale/sky /relight/scale/ground /sun/direction)
+"$lf" bag record --overwrite -o "$recorded" "${topics[@]}" >"$logs/record.log" 2>&1 &
+recorder=$!
+pids+=($recorder)
+
+# the clock runs 8 s before the first frame: time for the nodes to load and for the first sun update epoch
+echo "== playing $seq_dir/bag at rate $rate with /clock (8 s preroll)"
+"$lf" bag play "$seq_dir/bag" --rate "$rate" --clock --preroll 8 --wait-for-subscribers 60 \
+  --topics /camera/color/image_raw /camera/color/camera_info /camera/depth/image_raw /camera/depth/camera_info
+sleep 2  # the last frames' poses
 
 kill -INT "$recorder"
-wait "$recorder"
-pids=()
-echo "== summary"
-"$lf" bag compare "$bag" "$recorded"
+wait "$recorder" || true
+echo "== result ($mode)"
+"$lf" eval recording "$recorded" --truth "$seq_dir/bag"

@@ -18,11 +18,11 @@ Per frame, at the coarse pose ``T≈`` (``T_map_cam``):
 4. :func:`relit_image` renders the colour ``f(Δt · Σ_x s_x I_B̂x)`` and the depth of every pixel, the reference
    images of frame-to-model tracking.
 
-Solver for E_crf: the paper uses Levenberg–Marquardt. Here each channel is solved by
-``scipy.optimize.least_squares`` with ``method="trf"`` and bounds ``s ≥ 0`` by default: brightness scales are
-physically non-negative, and a component that barely reaches the valid pixels (the sun on a cloudy day, or out of
-view) would otherwise drift negative to absorb noise. ``solver="lm"`` (unbounded LM, as in the paper) is available;
-its result is clipped at 0. Both start from the better (by E_crf) of the E_lin solution on unsaturated pixels and
+Solver for E_crf: Levenberg–Marquardt as in the paper, written out for the K ≤ 3 unknowns of a channel. By default
+(``solver="bounded-lm"``) each trial step is projected onto ``s ≥ 0``: brightness scales are physically
+non-negative, and a component that barely reaches the valid pixels (the sun on a cloudy day, or out of view) would
+otherwise drift negative to absorb noise. ``solver="lm"`` (unbounded LM) is available; its result is clipped at 0.
+Both start from the better (by E_crf) of the E_lin solution on unsaturated pixels and
 the caller's ``initial`` (e.g. the previous average), because a start at which all pixels are predicted saturated
 has no gradient. Components whose images are zero on all valid pixels are *unobserved*: they keep their initial
 value (0 without one) and are flagged in :attr:`ScaleFit.observed`.
@@ -40,7 +40,7 @@ from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.optimize import least_squares, nnls
+from scipy.optimize import nnls
 
 from lightfast.camera import PinholeCamera
 from lightfast.daylight.crf import CameraResponse
@@ -274,32 +274,52 @@ def _crf_residuals(crf: CameraResponse, A: F64, y: F64, c: int, s: F64) -> F64:
     return crf.apply(x)[:, c] - y
 
 
-def _fit_channel_crf(crf: CameraResponse, A: F64, y: F64, c: int, x0: F64, solver: str) -> F64:
-    """Minimize Eq. 4 for one channel over the columns of ``A`` (already multiplied by Δt)."""
-    buf = np.zeros((len(y), 3))
+def _fit_channel_crf(crf: CameraResponse, A: F64, y: F64, c: int, x0: F64, solver: str, *,
+                     max_iterations: int = 50, tolerance: float = 1e-10) -> F64:
+    """Minimize Eq. 4 for one channel over the columns of ``A`` (already multiplied by Δt) by Levenberg–Marquardt.
 
-    def fun_jac(s: F64) -> tuple[F64, F64]:
-        buf[:, c] = A @ s
-        v, d = crf.apply_and_derivative(buf)
-        return v[:, c] - y, d[:, c, None] * A
+    A hand-written LM (Marquardt's diagonal damping; the system has only K ≤ 3 unknowns, so one step costs one
+    evaluation of f and f′ and a K×K solve — far cheaper than a general solver's bookkeeping). ``solver="bounded-lm"``
+    keeps ``s ≥ 0`` by projecting every trial step onto the bound (a step is accepted only if it lowers the cost);
+    ``"lm"`` is unconstrained and the result is clipped at 0.
+    """
+    if solver == "lm" and len(y) < len(x0):
+        raise BrightnessError(f"Levenberg-Marquardt needs at least {len(x0)} pixels, got {len(y)}")
+    bounded = solver != "lm"
 
-    cache: dict[str, tuple[bytes, tuple[F64, F64]]] = {}
+    def evaluate(s: F64) -> tuple[F64, F64, float]:
+        v, d = crf.channel_and_derivative(A @ s, c)
+        r = v - y
+        return r, d[:, None] * A, float(r @ r)
 
-    def evaluate(s: F64) -> tuple[F64, F64]:
-        key = s.tobytes()
-        if "last" not in cache or cache["last"][0] != key:
-            cache["last"] = (key, fun_jac(s))
-        return cache["last"][1]
-
-    kwargs: dict[str, object] = {"x_scale": "jac", "xtol": 1e-10, "ftol": 1e-10, "gtol": 1e-10, "max_nfev": 200}
-    if solver == "lm":
-        if len(y) < len(x0):
-            raise BrightnessError(f"Levenberg-Marquardt needs at least {len(x0)} pixels, got {len(y)}")
-        res = least_squares(lambda s: evaluate(s)[0], x0, jac=lambda s: evaluate(s)[1], method="lm", **kwargs)
-        return np.maximum(res.x, 0.0)
-    res = least_squares(lambda s: evaluate(s)[0], np.maximum(x0, 0.0), jac=lambda s: evaluate(s)[1],
-                        bounds=(0.0, np.inf), method="trf", **kwargs)
-    return res.x
+    s = np.maximum(x0, 0.0) if bounded else x0.astype(np.float64)
+    r, J, cost = evaluate(s)
+    lam = 1e-3
+    for _ in range(max_iterations):
+        g = J.T @ r
+        H = J.T @ J
+        diag = np.maximum(np.diag(H), 1e-12 * max(float(np.max(np.diag(H))), 1e-300))
+        improved = False
+        while lam < 1e12:
+            try:
+                step = np.linalg.solve(H + lam * np.diag(diag), -g)
+            except np.linalg.LinAlgError:
+                lam *= 10.0
+                continue
+            trial = np.maximum(s + step, 0.0) if bounded else s + step
+            r_t, J_t, cost_t = evaluate(trial)
+            if cost_t < cost:
+                moved = float(np.linalg.norm(trial - s))
+                s, r, J = trial, r_t, J_t
+                rel = (cost - cost_t) / max(cost, 1e-300)
+                cost = cost_t
+                lam = max(lam / 10.0, 1e-12)
+                improved = True
+                break
+            lam *= 10.0
+        if not improved or rel < tolerance or moved <= tolerance * (1.0 + float(np.linalg.norm(s))):
+            break
+    return np.maximum(s, 0.0)
 
 
 def fit_scales(
@@ -310,7 +330,7 @@ def fit_scales(
     valid: ArrayLike | None = None,
     method: Literal["crf", "lin"] = "crf",
     initial: ArrayLike | Mapping[str, ArrayLike] | ScaleFit | None = None,
-    solver: Literal["trf", "lm"] = "trf",
+    solver: Literal["bounded-lm", "lm"] = "bounded-lm",
 ) -> ScaleFit:
     """Estimate the brightness scales ``s_x`` per colour channel from the live image (§III-C).
 
@@ -323,12 +343,12 @@ def fit_scales(
         method: ``"crf"`` minimizes E_crf (Eq. 4), ``"lin"`` E_lin (Eq. 6) by non-negative least squares.
         initial: (K, 3) / (K,) / mapping / :class:`ScaleFit` starting scales (e.g. the previous average); used for
             E_crf and kept for unobserved components.
-        solver: ``"trf"`` (bounded, s ≥ 0) or ``"lm"`` (Levenberg–Marquardt, clipped at 0); see the module docs.
+        solver: ``"bounded-lm"`` (s ≥ 0) or ``"lm"`` (unbounded, clipped at 0); see the module docs.
     """
     if method not in ("crf", "lin"):
         raise BrightnessError(f"unknown method {method!r} (use 'crf' or 'lin')")
-    if solver not in ("trf", "lm"):
-        raise BrightnessError(f"unknown solver {solver!r} (use 'trf' or 'lm')")
+    if solver not in ("bounded-lm", "lm"):
+        raise BrightnessError(f"unknown solver {solver!r} (use 'bounded-lm' or 'lm')")
     if isinstance(images, RadiosityImages):
         if valid is None:
             valid = images.valid
@@ -369,7 +389,7 @@ def fit_scales(
             b = crf.linearize(np.repeat(y[rows, None], 3, axis=1))[:, c] / dt
             candidates = [nnls(Ao[rows], b)[0]]
             if initial is not None:
-                candidates.append(np.maximum(s0[obs, c], 0.0) if solver == "trf" else s0[obs, c])
+                candidates.append(np.maximum(s0[obs, c], 0.0) if solver == "bounded-lm" else s0[obs, c])
             costs = [float(np.sum(_crf_residuals(crf, Ao * dt, y, c, s) ** 2)) for s in candidates]
             x0 = candidates[int(np.argmin(costs))]
             scales[obs, c] = _fit_channel_crf(crf, Ao * dt, y, c, x0, solver)
@@ -396,7 +416,7 @@ class BrightnessEstimator:
         names: Sequence[str] = COMPONENTS,
         window: int = 30,
         method: Literal["crf", "lin"] = "crf",
-        solver: Literal["trf", "lm"] = "trf",
+        solver: Literal["bounded-lm", "lm"] = "bounded-lm",
         min_pixels: int = 10,
     ) -> None:
         if int(window) < 1:
@@ -407,7 +427,7 @@ class BrightnessEstimator:
         self.names = tuple(names)
         self.window = int(window)
         self.method: Literal["crf", "lin"] = method
-        self.solver: Literal["trf", "lm"] = solver
+        self.solver: Literal["bounded-lm", "lm"] = solver
         self.min_pixels = int(min_pixels)
         self._history: deque[F64] = deque(maxlen=self.window)
         self._scales = np.zeros((len(self.names), 3))

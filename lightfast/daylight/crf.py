@@ -205,16 +205,18 @@ class CameraResponse:
         value = np.empty(xs.shape, dtype=np.float64)
         slope = np.empty(xs.shape, dtype=np.float64)
         for c in range(3):
-            table = self.inverse[:, c]
-            xc = xs[..., c]
-            k = np.searchsorted(table, xc, side="right") - 1  # segment index; -1 below, 255 at/after the top
-            inside = (k >= 0) & (k < LEVELS - 1)
-            kk = np.clip(k, 0, LEVELS - 2)
-            s = self._slopes[kk, c]
-            v = kk + (xc - table[kk]) * s
-            value[..., c] = np.where(inside, v, np.where(k < 0, 0.0, MAX_VALUE))
-            slope[..., c] = np.where(inside, s, 0.0)
+            value[..., c], slope[..., c] = self.channel_and_derivative(xs[..., c], c)
         return value, slope
+
+    def channel_and_derivative(self, x: NDArray[np.floating], channel: int) -> tuple[F64, F64]:
+        """``(f_c(x), f_c'(x))`` of one colour channel ``c`` for exposures ``x`` of any shape."""
+        table = self.inverse[:, channel]
+        k = np.searchsorted(table, x, side="right") - 1  # segment index; -1 below, 255 at/after the top
+        inside = (k >= 0) & (k < LEVELS - 1)
+        kk = np.clip(k, 0, LEVELS - 2)
+        s = self._slopes[kk, channel]
+        v = kk + (x - table[kk]) * s
+        return np.where(inside, v, np.where(k < 0, 0.0, MAX_VALUE)), np.where(inside, s, 0.0)
 
     def linearize(self, pixels: ArrayLike) -> F64:
         """``f⁻¹``: pixel values (..., 3) (uint8 or float, clipped to [0, 255]) → relative exposures."""

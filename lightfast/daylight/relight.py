@@ -62,8 +62,8 @@ class RelightConfig(Config):
     reference: str = param("relit", description="Reference colour: the relit map (proposed) or the reflectance "
                            "map scaled to the live mean brightness (refl-f2m baseline).", choices=REFERENCE_KINDS)
     method: str = param("crf", description="Brightness error: E_crf (Eq. 4) or E_lin (Eq. 6).", choices=("crf", "lin"))
-    solver: str = param("trf", description="E_crf solver: bounded trust-region (s >= 0) or Levenberg-Marquardt.",
-                        choices=("trf", "lm"))
+    solver: str = param("bounded-lm", description="E_crf solver: Levenberg-Marquardt with s >= 0 or unbounded.",
+                        choices=("bounded-lm", "lm"))
     stride_px: int = param(15, description="Grid spacing of the pixel subset Omega, pixels.", min=1, max=200)
     window: int = param(30, description="Frames in the moving average of the scales.", min=1, max=10_000)
     min_reflectance: float = param(MIN_REFLECTANCE, description="Omega drops pixels with a smaller model "
@@ -191,9 +191,8 @@ class DaylightRelighter:
         t2 = time.perf_counter()
         h, wd = camera.height, camera.width
         if cfg.reference == "relit":
-            per_vertex = self._stack.reshape(-1, len(self.names), 3)
-            radiosity_v = np.einsum("vkc,kc->vc", per_vertex, scales.astype(np.float32))
-            color = self.crf.apply_radiosity(_interpolate(radiosity_v, corners, w))
+            per_pixel = _interpolate(self._stack, corners, w).reshape(len(hit), len(self.names), 3)
+            color = self.crf.apply_radiosity(np.einsum("nkc,kc->nc", per_pixel, scales.astype(np.float32)))
         else:
             refl = _interpolate(self._reflectance, corners, w).astype(np.float64)
             live = img.reshape(-1, 3).astype(np.float64)

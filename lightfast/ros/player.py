@@ -40,6 +40,9 @@ class PlayOptions(Config):
     clock_hz: float = param(0.0, description="Publish /clock (bag time) at this rate and before every message, for "
                             "nodes with use_sim_time; 0 disables /clock.", min=0.0)
     topics: tuple[str, ...] = param((), description="Topics to play; empty plays every topic.")
+    preroll_s: float = param(0.0, description="With /clock: before the first message, run the clock from this many "
+                             "seconds before it (at the playback rate, real time for rate 0), so nodes on sim time "
+                             "can get ready (e.g. a first sun update).", min=0.0, max=3600.0)
     start_offset_s: float = param(0.0, description="Skip this many seconds from the start of the bag.", min=0.0)
     wait_for_subscribers_s: float = param(0.0, description="Before playing, wait up to this long until every "
                                           "topic has a subscriber; 0 does not wait.", min=0.0)
@@ -102,6 +105,19 @@ def _wait_for_subscribers(publishers: dict[str, Publisher], timeout_s: float, st
         stop.wait(0.01)
 
 
+def _preroll(clock: _ClockPublisher, first_ns: int, options: PlayOptions, stop: threading.Event) -> None:
+    """Publish /clock from ``preroll_s`` before ``first_ns`` up to it, at the playback rate."""
+    rate = options.rate if options.rate > 0 else 1.0
+    span_ns = int(options.preroll_s * 1e9)
+    wall0 = time.monotonic()
+    while not stop.is_set():
+        elapsed_ns = int((time.monotonic() - wall0) * rate * 1e9)
+        if elapsed_ns >= span_ns:
+            break
+        clock.publish(first_ns - span_ns + elapsed_ns)
+        stop.wait(clock.period_s)
+
+
 def play_bag(
     bag: str | os.PathLike[str] | BagReader,
     node: Node,
@@ -148,6 +164,9 @@ def _play(reader: BagReader, node: Node, options: PlayOptions, stop: threading.E
         for msg in reader.messages(topics=topics, start_ns=start_ns):
             if first_ns is None:
                 first_ns = msg.log_time_ns
+                if loops == 1 and options.preroll_s > 0 and clock.publisher is not None:
+                    _preroll(clock, first_ns, options, stop)
+                    wall0 = time.monotonic()
                 clock.publish(first_ns)
             if options.rate > 0:
                 target = wall0 + (msg.log_time_ns - first_ns) * 1e-9 / options.rate

@@ -1,0 +1,149 @@
+"""Scoring a recorded live run of the tracking pipeline (the demo and the cross-process benchmark).
+
+Reads the outputs the nodes published — ``/tracker/pose``, ``/tracker/status``, ``/relight/status`` — from a bag
+recorded during ``lightfast bag play``, and the ground truth from the played bag. Reports:
+
+* accuracy as in paper §IV-C: RMSE of the translation error over the frames within 10 cm / 10° of ground truth; the
+  other frames count as tracking loss (a live run cannot be reset to ground truth, so a loss may last);
+* throughput: poses per second of wall time (the recorder's receive times), and frames that got no pose;
+* latency: the tracker's ``latency_ms`` (node clock at publication minus the image stamp; with ``use_sim_time``
+  the clock is the player's /clock, which runs with wall time at rate 1), median and 95th percentile;
+* per-stage timings like paper Table II: f2f and f2m from the tracker's status, rendering and estimation from the
+  relight node's status (median and mean, ms).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from lightfast.bag.reader import open_bag
+from lightfast.errors import LightfastError
+from lightfast.eval.daylight import LOSS_ROTATION_DEG, LOSS_TRANSLATION_M
+from lightfast.geometry import rotation_angle_deg
+from lightfast.topics import COLOR_TOPIC, GT_POSE_TOPIC, RELIGHT_STATUS_TOPIC, TRACKER_POSE_TOPIC, TRACKER_STATUS_TOPIC
+
+__all__ = ["RecordingScore", "score_recording"]
+
+STAGES = {"f2f": ("tracker", "f2f_ms"), "rendering": ("relight", "render_ms"),
+          "estimation": ("relight", "estimate_ms"), "f2m": ("tracker", "f2m_ms")}
+
+
+class RecordingError(LightfastError):
+    """A recording cannot be scored (missing topics, no poses)."""
+
+
+@dataclass
+class RecordingScore:
+    frames: int
+    poses: int
+    f2m: int
+    rmse_m: float
+    loss_ratio: float
+    fps: float
+    latency_ms: NDArray[np.float64]
+    stages_ms: dict[str, NDArray[np.float64]] = field(default_factory=dict)
+
+    def summary(self) -> str:
+        lat = self.latency_ms
+        lines = [
+            f"frames {self.frames}, poses {self.poses} ({self.frames - self.poses} without a pose), "
+            f"f2m {self.f2m} ({100 * self.f2m / max(self.poses, 1):.1f} %)",
+            f"RMSE {100 * self.rmse_m:.2f} cm, tracking loss {100 * self.loss_ratio:.2f} % "
+            f"(> {100 * LOSS_TRANSLATION_M:.0f} cm or {LOSS_ROTATION_DEG:.0f} deg)",
+            f"throughput {self.fps:.1f} poses/s; latency image stamp -> /tracker/pose: median "
+            f"{np.median(lat) if len(lat) else math.nan:.1f} ms, p95 "
+            f"{np.percentile(lat, 95) if len(lat) else math.nan:.1f} ms",
+        ]
+        return "\n".join(lines) + "\n" + self.stage_table()
+
+    def stage_table(self) -> str:
+        rows = ["| stage | median ms | mean ms | frames |", "|---|---|---|---|"]
+        for name, v in self.stages_ms.items():
+            if len(v):
+                rows.append(f"| {name} | {np.median(v):.1f} | {np.mean(v):.1f} | {len(v)} |")
+            else:
+                rows.append(f"| {name} | — | — | 0 |")
+        return "\n".join(rows) + "\n"
+
+
+def _values(msg: object) -> dict[str, str]:
+    from lightfast.ros.diagnostics import diagnostic_values
+
+    status = getattr(msg, "status", [])
+    return diagnostic_values(status[0]) if status else {}
+
+
+def score_recording(recorded: Path, truth: Path) -> RecordingScore:
+    """Score the pipeline outputs in ``recorded`` against the ground truth poses in ``truth`` (see module doc)."""
+    from lightfast.ros.convert import pose_stamped_to_matrix
+
+    gt: dict[int, NDArray[np.float64]] = {}
+    frames = 0
+    with open_bag(truth) as bag:
+        for m in bag.messages(topics=[GT_POSE_TOPIC, COLOR_TOPIC]):
+            msg = bag.deserialize(m)
+            if m.topic == GT_POSE_TOPIC:
+                T, stamp, _ = pose_stamped_to_matrix(msg)
+                gt[stamp] = T
+            else:
+                frames += 1
+    if not gt:
+        raise RecordingError(f"{truth}: no ground truth on {GT_POSE_TOPIC}")
+    errors: list[tuple[float, float]] = []
+    receive_s: list[float] = []
+    latency: list[float] = []
+    stages: dict[str, list[float]] = {k: [] for k in STAGES}
+    f2m = 0
+    with open_bag(recorded) as bag:
+        topics = set(bag.select_topics(None))
+        if TRACKER_POSE_TOPIC not in topics:
+            raise RecordingError(f"{recorded}: no {TRACKER_POSE_TOPIC} recorded")
+        wanted = [t for t in (TRACKER_POSE_TOPIC, TRACKER_STATUS_TOPIC, RELIGHT_STATUS_TOPIC) if t in topics]
+        for m in bag.messages(topics=wanted):
+            msg = bag.deserialize(m)
+            if m.topic == TRACKER_POSE_TOPIC:
+                T, stamp, _ = pose_stamped_to_matrix(msg)
+                if stamp in gt:
+                    E = np.linalg.solve(gt[stamp], T)
+                    errors.append((float(np.linalg.norm(E[:3, 3])), float(rotation_angle_deg(E[:3, :3]))))
+                receive_s.append(m.log_time_ns * 1e-9)
+                continue
+            v = _values(msg)
+            if m.topic == TRACKER_STATUS_TOPIC:
+                if v.get("source") not in ("f2m", "f2f"):
+                    continue
+                f2m += v.get("source") == "f2m"
+                if v.get("latency_ms"):
+                    latency.append(float(v["latency_ms"]))
+            elif not v.get("stamp_ns") or not v.get("render_ms"):
+                continue  # a heartbeat or a frame without a reference
+            node = "tracker" if m.topic == TRACKER_STATUS_TOPIC else "relight"
+            for stage, (who, key) in STAGES.items():
+                if who == node and v.get(key):
+                    stages[stage].append(float(v[key]))
+    if not errors:
+        raise RecordingError(f"{recorded}: no {TRACKER_POSE_TOPIC} message matches a ground-truth stamp")
+    e = np.array(errors)
+    ok = (e[:, 0] <= LOSS_TRANSLATION_M) & (e[:, 1] <= LOSS_ROTATION_DEG)
+    rmse = float(np.sqrt(np.mean(e[ok, 0] ** 2))) if ok.any() else math.nan
+    span = receive_s[-1] - receive_s[0] if len(receive_s) > 1 else 0.0
+    return RecordingScore(
+        frames=frames, poses=len(errors), f2m=int(f2m), rmse_m=rmse, loss_ratio=float(1.0 - ok.mean()),
+        fps=(len(receive_s) - 1) / span if span > 0 else math.nan, latency_ms=np.array(latency),
+        stages_ms={k: np.array(v) for k, v in stages.items()})
+
+
+def main_eval_recording(argv: list[str] | None = None) -> int:
+    """``lightfast eval recording RECORDED --truth BAG``."""
+    import argparse
+
+    p = argparse.ArgumentParser(prog="lightfast eval recording", description=__doc__.split("\n\n")[0])
+    p.add_argument("recorded", type=Path, help="bag recorded from the running nodes")
+    p.add_argument("--truth", type=Path, required=True, help="the bag that was played (with ground truth poses)")
+    args = p.parse_args(argv)
+    print(score_recording(args.recorded, args.truth).summary(), end="")
+    return 0
