@@ -10,6 +10,9 @@
 #   FRAMES           frames to simulate at 30 Hz (default 300)
 #   SIZE             image size WxH (default 320x240)
 #   RESOLUTION       scene mesh resolution in metres (default 0.04: a quick first run)
+#   PATCH_SIZE       lighting-map patch size in metres (default 0.1, as in the paper)
+#   SUN_UPDATE_PERIOD  seconds between B̂_sun updates (default 60; small values keep sun chunks streaming)
+#   PREROLL          seconds the clock runs before the first frame, for the first sun update (default 8)
 #   MODE             tracker mode: proposed | refl-f2m | depth-only | no-color-f2m (default proposed)
 #   RATE             playback rate (default 1 = real time)
 #   ROS_DOMAIN_ID    DDS domain (default: a random id)
@@ -23,20 +26,24 @@ sequence=${SEQUENCE:-DS1.T6}
 frames=${FRAMES:-300}
 size=${SIZE:-320x240}
 resolution=${RESOLUTION:-0.04}
+patch_size=${PATCH_SIZE:-0.1}
+preroll=${PREROLL:-8}
+sun_period=${SUN_UPDATE_PERIOD:-60.0}
+[[ $sun_period == *.* ]] || sun_period="$sun_period.0"  # a double parameter
 mode=${MODE:-proposed}
 rate=${RATE:-1}
 export ROS_DOMAIN_ID=${ROS_DOMAIN_ID:-$(( (RANDOM % 200) + 20 ))}
 sim="$out/daylight-sim-$size-$frames-$resolution"
 scene=${sequence%%.*}
 seq_dir="$sim/$sequence"
-map="$sim/maps/$scene"
+map="$sim/maps/$scene-$patch_size"
 mkdir -p "$out"
 
 echo "== recording $sequence ($frames frames, $size) in $sim (reused when complete)"
 "$lf" sim daylight "$sim" --sequences "$sequence" --frames "$frames" --size "$size" --resolution "$resolution"
 if [ ! -f "$map/metadata.json" ]; then
   echo "== preparing the lighting map of $scene in $map"
-  "$lf" daylight prepare "$sim/scenes/$scene.ply" "$sim/scenes/$scene.site.yaml" "$map"
+  "$lf" daylight prepare "$sim/scenes/$scene.ply" "$sim/scenes/$scene.site.yaml" "$map" --patch-size "$patch_size"
 fi
 initial_pose=$("$lf" bag pose "$seq_dir/bag")  # the evaluation protocol's known start pose
 
@@ -53,7 +60,7 @@ trap 'echo "interrupted"; exit 130' INT TERM
 logs="$out/demo-logs"
 mkdir -p "$logs"
 echo "== starting the nodes (domain $ROS_DOMAIN_ID, logs in $logs)"
-"$bin/sun_update_node" --ros-args -p use_sim_time:=true -p lighting_map:="$map" -p update_period_s:=60.0 \
+"$bin/sun_update_node" --ros-args -p use_sim_time:=true -p lighting_map:="$map" -p update_period_s:="$sun_period" \
   >"$logs/sun_update_node.log" 2>&1 &
 pids+=($!)
 "$bin/daylight_relight_node" --ros-args -p use_sim_time:=true -p lighting_map:="$map" \
@@ -66,15 +73,15 @@ pids+=($!)
 
 recorded="$out/demo-output"
 topics=(/tracker/pose /tracker/coarse_pose /tracker/odometry /tracker/status /relight/status
-        /relight/scale/sun /relight/scale/sky /relight/scale/ground /sun/direction)
+        /relight/scale/sun /relight/scale/sky /relight/scale/ground /sun/direction /radiosity/sun_chunk)
 "$lf" bag record --overwrite -o "$recorded" "${topics[@]}" >"$logs/record.log" 2>&1 &
 recorder=$!
 pids+=($recorder)
 
-# the clock runs 8 s before the first frame: time for the nodes to load and for the first sun update epoch
-echo "== playing $seq_dir/bag at rate $rate with /clock (8 s preroll)"
-"$lf" bag play "$seq_dir/bag" --rate "$rate" --clock --preroll 8 --wait-for-subscribers 60 \
-  --topics /camera/color/image_raw /camera/color/camera_info /camera/depth/image_raw /camera/depth/camera_info
+# the clock runs $preroll s before the first frame: time for the first sun update epoch to stream in
+echo "== playing $seq_dir/bag at rate $rate with /clock ($preroll s preroll)"
+"$lf" bag play "$seq_dir/bag" --rate "$rate" --clock --preroll "$preroll" --wait-for-subscribers 120 \
+  --topics /camera/color/image_raw /camera/color/camera_info /camera/depth/image_raw
 sleep 2  # the last frames' poses
 
 kill -INT "$recorder"

@@ -24,7 +24,14 @@ from lightfast.bag.reader import open_bag
 from lightfast.errors import LightfastError
 from lightfast.eval.daylight import LOSS_ROTATION_DEG, LOSS_TRANSLATION_M
 from lightfast.geometry import rotation_angle_deg
-from lightfast.topics import COLOR_TOPIC, GT_POSE_TOPIC, RELIGHT_STATUS_TOPIC, TRACKER_POSE_TOPIC, TRACKER_STATUS_TOPIC
+from lightfast.topics import (
+    COLOR_TOPIC,
+    GT_POSE_TOPIC,
+    RELIGHT_STATUS_TOPIC,
+    SUN_CHUNK_TOPIC,
+    TRACKER_POSE_TOPIC,
+    TRACKER_STATUS_TOPIC,
+)
 
 __all__ = ["RecordingScore", "score_recording"]
 
@@ -46,6 +53,8 @@ class RecordingScore:
     fps: float
     latency_ms: NDArray[np.float64]
     stages_ms: dict[str, NDArray[np.float64]] = field(default_factory=dict)
+    sun_chunks: int = 0  # B̂_sun chunks received while poses were being published
+    sun_epochs: int = 0
 
     def summary(self) -> str:
         lat = self.latency_ms
@@ -57,6 +66,7 @@ class RecordingScore:
             f"throughput {self.fps:.1f} poses/s; latency image stamp -> /tracker/pose: median "
             f"{np.median(lat) if len(lat) else math.nan:.1f} ms, p95 "
             f"{np.percentile(lat, 95) if len(lat) else math.nan:.1f} ms",
+            f"sun update streaming meanwhile: {self.sun_chunks} chunks of {self.sun_epochs} epochs",
         ]
         return "\n".join(lines) + "\n" + self.stage_table()
 
@@ -102,8 +112,14 @@ def score_recording(recorded: Path, truth: Path) -> RecordingScore:
         topics = set(bag.select_topics(None))
         if TRACKER_POSE_TOPIC not in topics:
             raise RecordingError(f"{recorded}: no {TRACKER_POSE_TOPIC} recorded")
-        wanted = [t for t in (TRACKER_POSE_TOPIC, TRACKER_STATUS_TOPIC, RELIGHT_STATUS_TOPIC) if t in topics]
+        wanted = [t for t in (TRACKER_POSE_TOPIC, TRACKER_STATUS_TOPIC, RELIGHT_STATUS_TOPIC, SUN_CHUNK_TOPIC)
+                  if t in topics]
+        chunk_times: list[tuple[float, int]] = []
         for m in bag.messages(topics=wanted):
+            if m.topic == SUN_CHUNK_TOPIC:  # only the arrival time and epoch (header stamp) are needed
+                header = bag.deserialize(m).header
+                chunk_times.append((m.log_time_ns * 1e-9, header.stamp.sec * 1_000_000_000 + header.stamp.nanosec))
+                continue
             msg = bag.deserialize(m)
             if m.topic == TRACKER_POSE_TOPIC:
                 T, stamp, _ = pose_stamped_to_matrix(msg)
@@ -131,10 +147,11 @@ def score_recording(recorded: Path, truth: Path) -> RecordingScore:
     ok = (e[:, 0] <= LOSS_TRANSLATION_M) & (e[:, 1] <= LOSS_ROTATION_DEG)
     rmse = float(np.sqrt(np.mean(e[ok, 0] ** 2))) if ok.any() else math.nan
     span = receive_s[-1] - receive_s[0] if len(receive_s) > 1 else 0.0
+    during = [epoch for t, epoch in chunk_times if receive_s[0] <= t <= receive_s[-1]]
     return RecordingScore(
         frames=frames, poses=len(errors), f2m=int(f2m), rmse_m=rmse, loss_ratio=float(1.0 - ok.mean()),
         fps=(len(receive_s) - 1) / span if span > 0 else math.nan, latency_ms=np.array(latency),
-        stages_ms={k: np.array(v) for k, v in stages.items()})
+        stages_ms={k: np.array(v) for k, v in stages.items()}, sun_chunks=len(during), sun_epochs=len(set(during)))
 
 
 def main_eval_recording(argv: list[str] | None = None) -> int:
