@@ -117,7 +117,10 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 #: Bump when the output of the same parameters changes.
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2  # 2: gaze angular rates limited (the look-at gaze whipped at up to 900°/s near targets)
+#: Limits of the gaze's angular rates (before the hand jitter), like a person panning a hand-held camera.
+MAX_YAW_RATE_DEG_S = 75.0
+MAX_PITCH_RATE_DEG_S = 45.0
 
 
 @dataclass(frozen=True)
@@ -251,6 +254,15 @@ def _look_at(p: NDArray[np.float64], f: NDArray[np.float64], roll: float) -> NDA
     return T
 
 
+def _rate_limited(x: NDArray[np.float64], max_step: float) -> NDArray[np.float64]:
+    """``x`` followed with at most ``max_step`` change per sample (a first-order slew-rate limiter)."""
+    out = np.empty_like(x)
+    out[0] = x[0]
+    for i in range(1, len(x)):  # sequential by nature; n_frames samples only
+        out[i] = out[i - 1] + min(max(x[i] - out[i - 1], -max_step), max_step)
+    return out
+
+
 def hand_held_trajectory(scene: DaylightScene, n_frames: int, rate_hz: float, rng: np.random.Generator, *,
                          sunlit_points: NDArray[np.float64] | None = None,
                          surface_points: NDArray[np.float64] | None = None,
@@ -258,7 +270,9 @@ def hand_held_trajectory(scene: DaylightScene, n_frames: int, rate_hz: float, rn
     """Camera poses ``(n_frames, 4, 4)`` (T_map_camera, optical frame): a smooth walk at 0.2–0.5 m/s through the
     free middle of the room (PCHIP through random waypoints, so it never overshoots them) at 1.15–1.75 m,
     looking at a sequence of targets (random surface points, ~40 % of them sunlit), with smooth roll (±4°) and
-    2–9 Hz hand jitter (≈ 0.3° and ≈ 1.5 mm rms)."""
+    2–9 Hz hand jitter (≈ 0.3° and ≈ 1.5 mm rms). The gaze follows the targets with its yaw and pitch rates limited
+    to :data:`MAX_YAW_RATE_DEG_S` and :data:`MAX_PITCH_RATE_DEG_S` (a target passing close by would otherwise whip
+    the camera round at hundreds of degrees per second)."""
     W, D, _ = scene.room_size_m
     lo = np.array([wall_margin_m, wall_margin_m, 1.15])
     hi = np.array([W - wall_margin_m, D - wall_margin_m, 1.75])
@@ -319,6 +333,8 @@ def hand_held_trajectory(scene: DaylightScene, n_frames: int, rate_hz: float, rn
     def smooth(x: NDArray[np.float64]) -> NDArray[np.float64]:
         return np.convolve(np.pad(x, k, mode="edge"), kern, mode="valid")
 
+    yaw = _rate_limited(yaw, math.radians(MAX_YAW_RATE_DEG_S) / rate_hz)
+    pitch = _rate_limited(pitch, math.radians(MAX_PITCH_RATE_DEG_S) / rate_hz)
     yaw, pitch = smooth(yaw), smooth(pitch)
     roll = math.radians(4.0) * np.sin(2 * math.pi * t / 7.0 + ph[2]) * np.sin(2 * math.pi * t / 3.1 + ph[3])
     # hand jitter: sums of sinusoids at 2–9 Hz

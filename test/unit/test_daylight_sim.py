@@ -277,6 +277,9 @@ def test_trajectory_is_hand_held_like() -> None:
     assert 0.18 < np.median(speed) < 0.52 and speed.max() < 0.6
     R = poses[:, :3, :3]
     assert np.allclose(np.einsum("nji,njk->nik", R, R), np.eye(3), atol=1e-9)
+    rel = np.einsum("nji,njk->nik", R[:-1], R[1:])
+    rate_deg_s = np.degrees(np.arccos(np.clip((np.trace(rel, axis1=1, axis2=2) - 1) / 2, -1, 1))) * 30.0
+    assert rate_deg_s.max() < 110.0 and np.median(rate_deg_s) < 75.0  # hand-held panning: gaze limit + jitter
     a = cloud_transmittance(np.arange(600) / 30.0, np.random.default_rng(0))
     assert a.min() < 0.2 and a.max() > 0.9 and np.abs(np.diff(a)).max() < 0.2
 
