@@ -35,7 +35,7 @@ from numpy.typing import NDArray
 from lightfast.bag.reader import open_bag
 from lightfast.camera import PinholeCamera
 from lightfast.daylight.crf import load_crf
-from lightfast.daylight.lighting_map import LightingMap
+from lightfast.daylight.lighting_map import LightingMap, LightingMapConfig
 from lightfast.daylight.relight import DaylightRelighter, RelightConfig
 from lightfast.daylight.sun import sun_position
 from lightfast.daylight.sun_update import sun_radiosity
@@ -199,18 +199,22 @@ def run_sequence(seq_dir: Path, lmap: LightingMap, method: str, *, max_frames: i
 # the whole evaluation
 
 
-def _lighting_map(scene: str, sim_dir: Path, maps_dir: Path, progress: bool) -> LightingMap:
+def _lighting_map(scene: str, sim_dir: Path, maps_dir: Path, progress: bool,
+                  config: LightingMapConfig | None = None) -> LightingMap:
     """The scene's lighting map, prepared once into ``maps_dir/<scene>`` (reused while the mesh is unchanged)."""
-    from lightfast.daylight.lighting_map import LightingMapConfig, prepare_lighting_map
+    from lightfast.daylight.lighting_map import prepare_lighting_map
     from lightfast.daylight.mesh import load_ply
     from lightfast.daylight.sun import Site
 
     out = maps_dir / scene
     mesh_path, site_path = sim_dir / "scenes" / f"{scene}.ply", sim_dir / "scenes" / f"{scene}.site.yaml"
     if out.exists():
-        return LightingMap.load(out)
+        lmap = LightingMap.load(out)
+        if lmap.mesh.content_hash != load_ply(mesh_path).content_hash:
+            raise EvalError(f"{out} was prepared for another {scene} mesh; remove it to prepare it again")
+        return lmap
     log.info("preparing the lighting map of %s into %s", scene, out)
-    lmap = prepare_lighting_map(load_ply(mesh_path), Site.from_yaml(site_path), LightingMapConfig(),
+    lmap = prepare_lighting_map(load_ply(mesh_path), Site.from_yaml(site_path), config or LightingMapConfig(),
                                 progress=progress)
     lmap.save(out)
     return lmap
@@ -328,6 +332,7 @@ def brightness_correlation(run: SequenceRun, seq_dir: Path) -> float:
 def evaluate_daylight(sim_dir: Path, out_dir: Path, *, methods: Sequence[str] = tuple(METHODS),
                       sequences: Sequence[str] | None = None, maps_dir: Path | None = None,
                       max_frames: int | None = None, progress: bool = True, jobs: int = 1,
+                      map_config: LightingMapConfig | None = None,
                       on_run: Callable[[SequenceRun], None] | None = None) -> list[SequenceRun]:
     """Run ``methods`` over the recordings in ``sim_dir`` and write ``daylight_table.md``, ``daylight_frames.csv``,
     ``daylight_summary.json`` and PNG plots into ``out_dir``."""
@@ -346,11 +351,14 @@ def evaluate_daylight(sim_dir: Path, out_dir: Path, *, methods: Sequence[str] = 
     maps_dir = maps_dir or sim_dir / "maps"
     out_dir.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
-    jobs_list = [(str(seq), m, str(maps_dir), max_frames, str(sim_dir)) for seq in seq_dirs for m in methods]
+    cfg_dict = None if map_config is None else dataclasses.asdict(map_config)
+    jobs_list = [(str(seq), m, str(maps_dir), max_frames, str(sim_dir), cfg_dict) for seq in seq_dirs for m in methods]
     runs: list[SequenceRun] = []
     if jobs <= 1:
         for job in track(jobs_list, desc="daylight evaluation", enabled=progress, unit="run"):
             runs.append(_run_job(job))
+            log.info("%s %s: RMSE %.4f m, loss %.2f %%", runs[-1].sequence, runs[-1].method, runs[-1].rmse_m,
+                     100 * runs[-1].loss_ratio)
             if on_run is not None:
                 on_run(runs[-1])
     else:
@@ -359,7 +367,7 @@ def evaluate_daylight(sim_dir: Path, out_dir: Path, *, methods: Sequence[str] = 
 
         for scene in dict.fromkeys(json.loads((s / "sequence.json").read_text())["sequence"]["scene"]
                                    for s in seq_dirs):
-            _lighting_map(scene, sim_dir, maps_dir, progress)  # prepare once, before the workers load it
+            _lighting_map(scene, sim_dir, maps_dir, progress, map_config)  # prepare once, before the workers load it
         with ProcessPoolExecutor(max_workers=jobs, mp_context=mp.get_context("spawn")) as pool:
             for run in track(pool.map(_run_job, jobs_list), desc="daylight evaluation", total=len(jobs_list),
                              enabled=progress, unit="run"):
@@ -384,12 +392,12 @@ def evaluate_daylight(sim_dir: Path, out_dir: Path, *, methods: Sequence[str] = 
     return runs
 
 
-def _run_job(job: tuple[str, str, str, int | None, str]) -> SequenceRun:
+def _run_job(job: tuple[str, str, str, int | None, str, dict | None]) -> SequenceRun:
     """Worker of ``--jobs``: one (recording, method) run in its own process."""
-    seq_dir, method, maps_dir, max_frames, sim_dir = job
+    seq_dir, method, maps_dir, max_frames, sim_dir, map_config = job
     seq = Path(seq_dir)
     scene = json.loads((seq / "sequence.json").read_text())["sequence"]["scene"]
-    lmap = _cached_map(scene, Path(sim_dir), Path(maps_dir))
+    lmap = _cached_map(scene, Path(sim_dir), Path(maps_dir), map_config)
     return run_sequence(seq, lmap, method, max_frames=max_frames, progress=False,
                         sun_B=_cached_sun(seq, lmap))
 
@@ -398,11 +406,12 @@ _MAPS: dict[str, LightingMap] = {}
 _SUNS: dict[str, NDArray[np.float32]] = {}
 
 
-def _cached_map(scene: str, sim_dir: Path, maps_dir: Path) -> LightingMap:
+def _cached_map(scene: str, sim_dir: Path, maps_dir: Path, map_config: dict | None) -> LightingMap:
     if scene not in _MAPS:
         _MAPS.clear()
         _SUNS.clear()
-        _MAPS[scene] = _lighting_map(scene, sim_dir, maps_dir, progress=False)
+        cfg = None if map_config is None else LightingMapConfig(**map_config)
+        _MAPS[scene] = _lighting_map(scene, sim_dir, maps_dir, False, cfg)
     return _MAPS[scene]
 
 

@@ -1,0 +1,63 @@
+"""The §IV-C evaluation runner on a tiny simulated recording: protocol, outputs, errors."""
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from lightfast.daylight.lighting_map import LightingMapConfig
+from lightfast.eval.daylight import EvalError, evaluate_daylight, main_eval_daylight, table_markdown
+from lightfast.sim.daylight_recordings import generate_daylight_set
+from lightfast.sim.gt_renderer import CacheSettings
+
+TINY_CACHE = CacheSettings(hemisphere_samples=8, window_samples=4, sunlit_samples=4, sun_disk_samples=4, bounces=3,
+                           filter_radius_m=0.3)
+MAP = LightingMapConfig(patch_size_m=0.6, sky_directions=128, hemisphere_rays=16)
+
+
+@pytest.fixture(scope="module")
+def sim_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("sim")
+    generate_daylight_set(out, sequences=["DS1.T6"], frames=12, width=160, height=120, resolution_m=0.15,
+                          supersample=1, cache_settings=TINY_CACHE, progress=False)
+    return out
+
+
+def test_evaluation_writes_table_csv_json_and_plots(sim_dir: Path, tmp_path: Path) -> None:
+    out = tmp_path / "eval"
+    runs = evaluate_daylight(sim_dir, out, methods=["proposed", "depth-only"], maps_dir=tmp_path / "maps",
+                             progress=False, map_config=MAP)
+    assert [(r.sequence, r.method) for r in runs] == [("DS1.T6", "proposed"), ("DS1.T6", "depth-only")]
+    for r in runs:
+        assert len(r.frames) == 12 and 0.0 <= r.loss_ratio <= 1.0
+        assert r.frames[0].t_err_m < 0.05  # started at the ground truth of frame 0
+        lost = np.array([f.lost for f in r.frames])
+        t = np.array([f.t_err_m for f in r.frames])
+        r_deg = np.array([f.r_err_deg for f in r.frames])
+        np.testing.assert_array_equal(lost, (t > 0.10) | (r_deg > 10.0))  # the protocol's loss rule
+        if (~lost).any():
+            assert r.rmse_m == pytest.approx(float(np.sqrt(np.mean(t[~lost] ** 2))))
+    table = (out / "daylight_table.md").read_text()
+    assert "| DS1.T6 |" in table and "**average**" in table and table == table_markdown(runs, ["proposed",
+                                                                                                  "depth-only"])
+    rows = list(csv.DictReader((out / "daylight_frames.csv").open()))
+    assert len(rows) == 24 and {row["method"] for row in rows} == {"proposed", "depth-only"}
+    summary = json.loads((out / "daylight_summary.json").read_text())
+    assert {r["method"] for r in summary["runs"]} == {"proposed", "depth-only"}
+    assert (out / "daylight_tracking.png").stat().st_size > 1000
+    # the proposed method estimated brightness: non-zero sun scale after the first frames
+    assert max(runs[0].frames[-1].scale_sun) > 0
+
+
+def test_bad_inputs_are_clear_errors(sim_dir: Path, tmp_path: Path) -> None:
+    with pytest.raises(EvalError, match="unknown method"):
+        evaluate_daylight(sim_dir, tmp_path, methods=["magic"])
+    with pytest.raises(EvalError, match="not found"):
+        evaluate_daylight(sim_dir, tmp_path, sequences=["DS9.T1"])
+    with pytest.raises(EvalError, match="no recordings"):
+        evaluate_daylight(tmp_path / "nothing", tmp_path)
+    with pytest.raises(SystemExit):
+        main_eval_daylight(["--help"])
