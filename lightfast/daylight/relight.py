@@ -24,6 +24,7 @@ import time
 from dataclasses import dataclass, field
 from functools import lru_cache
 
+import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -36,7 +37,6 @@ from lightfast.daylight.brightness import (
     BrightnessEstimator,
     RadiosityImages,
     _grid_rays,
-    _interpolate,
     _pose,
 )
 from lightfast.daylight.crf import CameraResponse
@@ -93,6 +93,58 @@ class Reference:
 
     def scale(self, name: str) -> NDArray[np.float64]:
         return self.scales[self.names.index(name)]
+
+
+@numba.njit(cache=True, nogil=True)
+def _shade(triangle_id: NDArray[np.int64], uv: NDArray[np.float32], faces: NDArray[np.int64],
+           values: NDArray[np.float32], mix: NDArray[np.float32]) -> NDArray[np.float32]:
+    """Per ray: the per-vertex ``values`` (V, C) interpolated barycentrically at the hit, times ``mix`` (C, D);
+    0 where the ray missed (``triangle_id < 0``)."""
+    n, c_in, c_out = len(triangle_id), values.shape[1], mix.shape[1]
+    out = np.zeros((n, c_out), dtype=np.float32)
+    acc = np.empty(c_in, dtype=np.float32)
+    for i in range(n):
+        f = triangle_id[i]
+        if f < 0:
+            continue
+        b1, b2 = uv[i, 0], uv[i, 1]
+        b0 = 1.0 - b1 - b2
+        v0, v1, v2 = faces[f, 0], faces[f, 1], faces[f, 2]
+        for j in range(c_in):
+            acc[j] = b0 * values[v0, j] + b1 * values[v1, j] + b2 * values[v2, j]
+        for k in range(c_out):
+            total = 0.0
+            for j in range(c_in):
+                total += acc[j] * mix[j, k]
+            out[i, k] = total
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
+def _apply_response(x: NDArray[np.float32], inverse: NDArray[np.float64]) -> NDArray[np.uint8]:
+    """Rounded 8-bit ``f(x)`` per channel from the strictly increasing inverse table ``f⁻¹`` (256, 3), linear
+    between its entries, like :meth:`CameraResponse.apply`."""
+    n, top = x.shape[0], inverse.shape[0] - 1
+    out = np.empty((n, 3), dtype=np.uint8)
+    for i in range(n):
+        for c in range(3):
+            v = x[i, c]
+            if v <= inverse[0, c]:
+                out[i, c] = 0
+                continue
+            if v >= inverse[top, c]:
+                out[i, c] = top
+                continue
+            lo, hi = 0, top
+            while hi - lo > 1:  # inverse[lo] < v < inverse[hi]
+                mid = (lo + hi) // 2
+                if inverse[mid, c] <= v:
+                    lo = mid
+                else:
+                    hi = mid
+            value = lo + (v - inverse[lo, c]) / (inverse[hi, c] - inverse[lo, c])
+            out[i, c] = np.uint8(min(top, int(value + 0.5)))
+    return out
 
 
 @lru_cache(maxsize=8)
@@ -167,19 +219,12 @@ class DaylightRelighter:
         t0 = time.perf_counter()
         _, d_cam = _grid_rays(camera, 1)
         hits = self.lmap.caster.intersect(t, d_cam @ R.T)
-        hit = hits.hit
-        tri = np.take(self._faces, np.maximum(hits.triangle_id, 0), axis=0)
-        corners = (tri[:, 0], tri[:, 1], tri[:, 2])
-        bu = np.nan_to_num(hits.barycentric_uv, nan=0.0)
-        w = np.empty((len(hit), 3), dtype=np.float32)
-        w[:, 1], w[:, 2] = bu[:, 0], bu[:, 1]
-        w[:, 0] = np.where(hit, 1.0 - bu[:, 0] - bu[:, 1], 0.0)
+        hit, tri_id, uv = hits.hit, hits.triangle_id, hits.barycentric_uv
         depth = np.where(hit, hits.distance_m * d_cam[:, 2].astype(np.float32), 0.0).astype(np.float32)
         # Ω: the grid subset of the same cast
         g = _grid_index(camera, cfg.stride_px)
-        gc = (corners[0][g], corners[1][g], corners[2][g])
-        comp = _interpolate(self._stack, gc, w[g])  # (N, K*3)
-        rho = _interpolate(self._reflectance, gc, w[g])
+        comp = _shade(tri_id[g], uv[g], self._faces, self._stack, np.eye(self._stack.shape[1], dtype=np.float32))
+        rho = _shade(tri_id[g], uv[g], self._faces, self._reflectance, np.eye(3, dtype=np.float32))
         valid = hit[g] & np.all(rho >= cfg.min_reflectance, axis=1)
         images = RadiosityImages(_grid_rays(camera, cfg.stride_px)[0],
                                  {n: comp[:, 3 * k: 3 * k + 3] for k, n in enumerate(self.names)}, rho, valid,
@@ -191,16 +236,17 @@ class DaylightRelighter:
         t2 = time.perf_counter()
         h, wd = camera.height, camera.width
         if cfg.reference == "relit":
-            per_pixel = _interpolate(self._stack, corners, w).reshape(len(hit), len(self.names), 3)
-            color = self.crf.apply_radiosity(np.einsum("nkc,kc->nc", per_pixel, scales.astype(np.float32)))
+            # B = Σ_x s_x B̂_x per pixel (the (K·3, 3) matrix holds the scales), then f(Δt · B) through the table
+            mix = np.zeros((self._stack.shape[1], 3), dtype=np.float32)
+            for k in range(len(self.names)):
+                mix[3 * k: 3 * k + 3] = np.diag(scales[k] * self.crf.exposure_factor)
+            color8 = _apply_response(_shade(tri_id, uv, self._faces, self._stack, mix), self.crf.inverse)
         else:
-            refl = _interpolate(self._reflectance, corners, w).astype(np.float64)
-            live = img.reshape(-1, 3).astype(np.float64)
+            refl = _shade(tri_id, uv, self._faces, self._reflectance, np.eye(3, dtype=np.float32))
             m_ref = float(np.mean(refl[hit] @ _GREY)) if hit.any() else 0.0
-            m_live = float(np.mean(live[hit] @ _GREY)) if hit.any() else 0.0
-            color = refl * (m_live / m_ref if m_ref > 0 else 0.0)
-        color[~hit] = 0.0
-        color8 = np.clip(np.rint(color), 0, 255).astype(np.uint8).reshape(h, wd, 3)
+            m_live = float(np.mean(img.reshape(-1, 3)[hit] @ _GREY)) if hit.any() else 0.0
+            color8 = np.clip(np.rint(refl * (m_live / m_ref if m_ref > 0 else 0.0)), 0, 255).astype(np.uint8)
+        color8 = color8.reshape(h, wd, 3)
         t3 = time.perf_counter()
         return Reference(
             stamp_ns=int(stamp_ns), T_map_cam=np.asarray(T_map_cam, dtype=np.float64).copy(), color=color8,
