@@ -312,6 +312,8 @@ def build_parser() -> argparse.ArgumentParser:
     sim_sub = sim.add_subparsers(dest="sim_command", required=True, metavar="SIMULATOR")
     _add_passthrough(sim_sub, "daylight", "lightfast.sim.daylight_recordings:main_sim_daylight",
                      "indoor daylight RGB-D sequences DS1.T1-T6, DS2.T1-T6 (see `sim daylight --help`)")
+    _add_passthrough(sim_sub, "racr", "lightfast.sim.racr_scenes:main_sim_racr",
+                     "20 textured relocalization scenes with reference observations (see `sim racr --help`)")
     crf = sub.add_parser("crf", help="camera response function")
     crf_sub = crf.add_subparsers(dest="crf_command", required=True, metavar="CRF_COMMAND")
     _add_passthrough(crf_sub, "calibrate", "lightfast.daylight.crf:main_crf_calibrate",

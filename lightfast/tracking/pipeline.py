@@ -23,6 +23,7 @@ E_G alone in f2m.
 """
 from __future__ import annotations
 
+import dataclasses
 import logging
 import time
 from collections import OrderedDict
@@ -58,6 +59,10 @@ class TrackerConfig(TrackingConfig):
     )
     reference_timeout_s: float = param(0.5, description="A frame whose reference has not arrived after this "
                                        "long (wall time) is finished with its f2f pose.", min=0.0, max=60.0)
+    f2m_iterations: tuple[int, ...] = param(
+        (10, 5, 3), description="Gauss-Newton iterations per level of the f2m step, coarse to fine (it starts at "
+        "T≈, close to the solution).", min=1, max=200
+    )
     motion_prior: str = param("constant-velocity", description="Start of the f2f alignment: the previous frame's "
                               "relative motion (constant velocity) or identity (none).",
                               choices=("constant-velocity", "none"))
@@ -70,6 +75,9 @@ class TrackerConfig(TrackingConfig):
 
     def check(self) -> None:
         super().check()
+        if len(self.f2m_iterations) != self.pyramid_levels:
+            raise ConfigError(f"f2m_iterations has {len(self.f2m_iterations)} entries, expected pyramid_levels="
+                              f"{self.pyramid_levels}")
         if len(self.initial_pose) != 7:
             raise ConfigError(f"initial_pose needs 7 numbers (x y z qx qy qz qw), got {len(self.initial_pose)}")
         if abs(float(np.linalg.norm(self.initial_pose[3:])) - 1.0) > 1e-3:
@@ -223,7 +231,8 @@ class RGBDTracker:
                 return self._finish(stamp, p.T_best, "f2f", "reference has no valid depth", None,
                                     {"f2m": time.perf_counter() - t0})
             raise
-        res = align_frames(p.frame, ref, config=cfg, use_color=cfg.f2m_color, use_depth=True)
+        res = align_frames(p.frame, ref, config=dataclasses.replace(cfg, iterations=cfg.f2m_iterations),
+                           use_color=cfg.f2m_color, use_depth=True)
         seconds = {"f2m": time.perf_counter() - t0}
         dt = float(np.linalg.norm(res.T_target_source[:3, 3]))
         dr = float(rotation_angle_deg(res.T_target_source[:3, :3]))

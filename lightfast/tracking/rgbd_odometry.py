@@ -122,6 +122,10 @@ class TrackingConfig(Config):
     step_tolerance: float = param(
         1e-6, description="Stop a level when the update norm |xi| falls below this.", min=0.0
     )
+    finest_point_step: int = param(
+        1, description="Source points at the finest level: every pixel (1), a checkerboard (2) or every second row "
+        "and column (4); the reference keeps every pixel.", choices=(1, 2, 4)
+    )
     min_inlier_ratio: float = param(
         0.2, description="Below this inlier ratio the result is flagged as not converged.", min=0.0, max=1.0
     )
@@ -321,6 +325,8 @@ def _prepare(rgb: ArrayLike, depth_m: ArrayLike, camera: PinholeCamera, cfg: Tra
             )
         geometry = _geometry_map(depth, cam.fx, cam.fy, cam.cx, cam.cy)
         valid = depth > 0
+        if level == 0 and cfg.finest_point_step > 1:
+            valid = valid & _subsample_mask(depth.shape, cfg.finest_point_step)
         gu = cv2.Sobel(grey, cv2.CV_32F, 1, 0, ksize=3, borderType=cv2.BORDER_REPLICATE) * np.float32(0.125)
         gv = cv2.Sobel(grey, cv2.CV_32F, 0, 1, ksize=3, borderType=cv2.BORDER_REPLICATE) * np.float32(0.125)
         levels.append(
@@ -335,6 +341,12 @@ def _prepare(rgb: ArrayLike, depth_m: ArrayLike, camera: PinholeCamera, cfg: Tra
             )
         )
     return RGBDFrame(tuple(levels), camera, cfg.pyramid_levels, cfg.resolution_scale)
+
+
+def _subsample_mask(shape: tuple[int, ...], step: int) -> NDArray[np.bool_]:
+    """Pixels kept as source points: a checkerboard for ``step`` 2, every second row and column for 4."""
+    v, u = np.indices(shape[:2])
+    return ((u + v) % 2 == 0) if step == 2 else ((u % 2 == 0) & (v % 2 == 0))
 
 
 def prepare_frame(
