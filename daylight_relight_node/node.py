@@ -25,11 +25,9 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, Vector3, Vector3Stamped
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import CameraInfo, Image, PointCloud2
@@ -54,8 +52,8 @@ from lightfast.ros.convert import (
 from lightfast.ros.diagnostics import Level, ProblemLog, diagnostic_array, diagnostic_status
 from lightfast.ros.params import ConfigParameters
 from lightfast.ros.qos import SENSOR_QOS
+from lightfast.ros.runtime import run_node
 from lightfast.ros.sync import ExactTimePairs
-from lightfast.ros.transport import use_local_transport
 from lightfast.topics import (
     COARSE_POSE_TOPIC,
     COLOR_INFO_TOPIC,
@@ -325,22 +323,7 @@ class DaylightRelightNode(Node):
 
 
 def main(args: list[str] | None = None) -> int:
-    use_local_transport()
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = DaylightRelightNode()
-        rclpy.spin(node)
-    except (LightfastError, ConfigError) as exc:
-        print(f"{NODE_NAME}: error: {exc}", file=sys.stderr)
-        return 1
-    except (KeyboardInterrupt, ExternalShutdownException):  # Ctrl-C, or SIGTERM through rclpy's handler
-        pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    return run_node(DaylightRelightNode, NODE_NAME, args)
 
 
 if __name__ == "__main__":

@@ -26,17 +26,14 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped
 from nav_msgs.msg import Odometry
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, Image
 
 from lightfast.camera import PinholeCamera
-from lightfast.config import ConfigError
 from lightfast.errors import LightfastError
 from lightfast.ros.convert import (
     ConversionError,
@@ -50,8 +47,8 @@ from lightfast.ros.convert import (
 from lightfast.ros.diagnostics import Level, ProblemLog, diagnostic_array, diagnostic_status
 from lightfast.ros.params import ConfigParameters
 from lightfast.ros.qos import SENSOR_QOS
+from lightfast.ros.runtime import run_node
 from lightfast.ros.sync import ExactTimePairs
-from lightfast.ros.transport import use_local_transport
 from lightfast.topics import (
     COARSE_POSE_TOPIC,
     COLOR_INFO_TOPIC,
@@ -414,22 +411,7 @@ class RGBDTrackerNode(Node):
 
 
 def main(args: list[str] | None = None) -> int:
-    use_local_transport()
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = RGBDTrackerNode()
-        rclpy.spin(node)
-    except (LightfastError, ConfigError) as exc:
-        print(f"{NODE_NAME}: error: {exc}", file=sys.stderr)
-        return 1
-    except (KeyboardInterrupt, ExternalShutdownException):  # Ctrl-C, or SIGTERM through rclpy's handler
-        pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    return run_node(RGBDTrackerNode, NODE_NAME, args)
 
 
 if __name__ == "__main__":

@@ -12,9 +12,7 @@ from __future__ import annotations
 import sys
 
 import numpy as np
-import rclpy
 from geometry_msgs.msg import Vector3, Vector3Stamped
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from sensor_msgs.msg import PointCloud2
 
@@ -26,7 +24,7 @@ from lightfast.errors import LightfastError
 from lightfast.ros.convert import make_header, numpy_to_pointcloud2
 from lightfast.ros.params import ConfigParameters
 from lightfast.ros.qos import LATCHED_QOS, SENSOR_QOS
-from lightfast.ros.transport import use_local_transport
+from lightfast.ros.runtime import run_node
 from lightfast.topics import SUN_CHUNK_TOPIC, SUN_DIRECTION_TOPIC
 
 CHUNK_DTYPE = np.dtype([("vertex", "<u4"), ("r", "<f4"), ("g", "<f4"), ("b", "<f4")])
@@ -92,22 +90,7 @@ class SunUpdateNode(Node):
 
 
 def main(args: list[str] | None = None) -> int:
-    use_local_transport()
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = SunUpdateNode()
-        rclpy.spin(node)
-    except (LightfastError, ConfigError) as exc:
-        print(f"sun_update_node: error: {exc}", file=sys.stderr)
-        return 1
-    except (KeyboardInterrupt, ExternalShutdownException):  # Ctrl-C, or SIGTERM through rclpy's handler
-        pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    return run_node(SunUpdateNode, "sun_update_node", args)
 
 
 if __name__ == "__main__":

@@ -3,18 +3,20 @@ from __future__ import annotations
 
 import importlib
 import os
+import sys
 import threading
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 
 import rclpy
 from rclpy.context import Context
-from rclpy.executors import SingleThreadedExecutor
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.signals import SignalHandlerOptions
 
 from lightfast.bag.errors import UnknownMessageTypeError
+from lightfast.errors import LightfastError
 from lightfast.ros.transport import use_local_transport
 
 
@@ -73,3 +75,26 @@ def message_class(msgtype: str) -> type:
         raise UnknownMessageTypeError(
             f"message type {msgtype} is not installed here (no Python module {pkg}.{kind} with {name})"
         ) from None
+
+
+def run_node(make_node: Callable[[], Node], name: str, args: list[str] | None = None) -> int:
+    """The ``main`` of a node executable: lightfast's DDS profile, init, spin until Ctrl-C / SIGTERM, clean up.
+
+    A :class:`LightfastError` while constructing or spinning (bad parameters, a missing map) ends it with one line
+    ``<name>: error: …`` on stderr and exit code 1."""
+    use_local_transport()
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = make_node()
+        rclpy.spin(node)
+    except LightfastError as exc:
+        print(f"{name}: error: {exc}", file=sys.stderr)
+        return 1
+    except (KeyboardInterrupt, ExternalShutdownException):  # Ctrl-C, or SIGTERM through rclpy's handler
+        pass
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
