@@ -1,0 +1,573 @@
+"""Stereo visual odometry on greyscale and the pose solver shared with map localization: paper §IV-B (Fig. 3).
+
+Fig. 3 of the paper: "Tracked keypoints are sent to an outlier rejection algorithm to filter out inliers and obtain
+an initial pose estimate. This pose estimate is used to prime a non linear numerical solver to obtain a refined
+pose estimate. VO estimates are obtained in the same fashion, with the exception that the live view is compared
+to the most recent view, instead of the map." Both therefore use the same steps, here:
+
+1. **Matching** (:func:`match_landmarks`): descriptors of reference landmarks (3-D points in a reference frame) are
+   matched to the current frame's stereo keypoints (nearest neighbour, Lowe ratio, mutual check, largest
+   descriptor distance). With a prior pose and ``radius_px > 0`` only pairs whose reference point projects within
+   ``radius_px`` of the current keypoint are candidates (guided matching: fewer ambiguities across lighting
+   changes, the ratio test runs among spatially plausible candidates only, and far fewer descriptor distances).
+2. **Outlier rejection** (:func:`estimate_pose_stereo`): RANSAC with the 3-point 3-D–3-D minimal solver
+   (Kabsch/Horn on the reference points vs the current stereo points; the scheme of the VT&R system the paper
+   builds on, Furgale & Barfoot [6]), hypotheses vectorized in NumPy and scored by the **stereo reprojection
+   error** of every correspondence: the reference point projected into the current left image (u, v) and its
+   predicted disparity d, against the measured (u, v, d); inlier when the norm of the three residuals is below
+   ``threshold_px``. The disparity term rejects matches whose depth disagrees (random matches that happen to
+   reproject), and it makes the pose along the optical axis observable.
+3. **Nonlinear refinement**: Levenberg–Marquardt on the same stereo reprojection residuals of the inliers
+   (analytic Jacobian, SE(3) left perturbation), inliers re-selected with the refined pose, refined once more.
+   The 6×6 covariance σ²(JᵀJ)⁻¹ with a nominal σ = 1 px is returned; :attr:`PoseEstimate.position_std_m` (the
+   largest standard deviation of the camera position) tells a well-constrained pose from a degenerate one (e.g.
+   all inliers far away: rotation known, translation not).
+
+Frames and units: ``T_ref_cur`` maps points of the current left camera frame into the reference frame (REP-103
+optical axes, metres); pixels are those of the rectified left image. :class:`StereoCamera` holds the left
+intrinsics ``K = P_left[:, :3]`` (landmarks are expressed in the left camera frame, so ``K`` projects them),
+``fb`` = fx·baseline = Tx_left − Tx_right (px·m) and the principal-point offset ``dcx`` = cx_left − cx_right; the
+*effective* disparity of a keypoint is ``disparity − dcx`` = fb / Z.
+
+:class:`VisualOdometry` is the frame-to-frame greyscale VO of §IV-B: the previous frame's grey landmarks are the
+reference, the constant-velocity prediction primes guided matching, unguided matching is the fallback when the
+guided attempt finds fewer than ``min_inliers`` inliers.
+"""
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass, field
+from typing import Final
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.spatial import cKDTree
+
+from lightfast.config import Config, param
+from lightfast.vtr.errors import VtrInputError
+from lightfast.vtr.stereo import StereoFeatures, check_stereo_pair, match_descriptors, pair_distances
+
+__all__ = [
+    "PoseEstimate",
+    "StereoCamera",
+    "VisualOdometry",
+    "VisualOdometryConfig",
+    "VoResult",
+    "estimate_pose_stereo",
+    "match_landmarks",
+    "max_descriptor_distance",
+    "project",
+    "refine_pose_stereo",
+]
+
+log = logging.getLogger(__name__)
+
+#: Nominal measurement noise of keypoints and disparities for the pose covariance, px.
+NOMINAL_SIGMA_PX: Final = 1.0
+_BATCH: Final = 64  # RANSAC hypotheses scored per vectorized batch
+
+
+@dataclass(frozen=True)
+class VisualOdometryConfig(Config):
+    """Options of the frame-to-frame greyscale stereo VO (paper §IV-B, Fig. 3)."""
+
+    ratio: float = param(0.8, description="Lowe ratio test of frame-to-frame descriptor matches.", min=0.0, max=1.0)
+    mutual: bool = param(True, description="Keep only mutually nearest frame-to-frame matches.")
+    orb_max_distance: float = param(
+        80.0, description="ORB: largest Hamming distance of a frame-to-frame match (of 256 bits).", min=0.0
+    )
+    sift_max_distance: float = param(
+        300.0, description="SIFT: largest Euclidean distance of a frame-to-frame match.", min=0.0
+    )
+    match_radius_px: float = param(
+        40.0, description="Guided matching: the previous landmark, moved by the constant-velocity prediction, must "
+        "project within this of the current keypoint, px (0: unguided only).", min=0.0
+    )
+    ransac_threshold_px: float = param(
+        2.0, description="RANSAC inlier threshold on the stereo reprojection error (u, v, disparity), px.", min=0.1,
+        max=100.0,
+    )
+    ransac_iterations: int = param(500, description="Most RANSAC hypotheses.", min=10, max=100000)
+    ransac_confidence: float = param(0.999, description="RANSAC confidence (adaptive stop).", min=0.5, max=0.999999)
+    min_inliers: int = param(10, description="Fewest inliers for a VO estimate to count as a success.", min=4)
+    max_translation_m: float = param(
+        5.0, description="A frame-to-frame motion longer than this is rejected as a failure, m.", min=0.0
+    )
+
+
+@dataclass(frozen=True)
+class StereoCamera:
+    """The rectified stereo camera as the pose solver needs it (module docstring): ``K`` (3×3, px),
+    ``fb`` = fx·baseline (px·m) and ``dcx`` = cx_left − cx_right (px)."""
+
+    K: NDArray[np.float64]
+    fb: float
+    dcx: float
+
+    @classmethod
+    def from_projections(cls, P_left: ArrayLike, P_right: ArrayLike) -> StereoCamera:
+        Pl, Pr = check_stereo_pair(P_left, P_right)
+        return cls(np.ascontiguousarray(Pl[:, :3]), float(Pl[0, 3] - Pr[0, 3]), float(Pl[0, 2] - Pr[0, 2]))
+
+    def effective_disparity(self, features: StereoFeatures) -> NDArray[np.float64]:
+        """fb / Z of every landmark of ``features`` (its raw disparity minus ``dcx``)."""
+        return features.disparity.astype(np.float64) - self.dcx
+
+
+@dataclass(frozen=True)
+class PoseEstimate:
+    """Result of :func:`estimate_pose_stereo`.
+
+    ``T_ref_cur`` (4×4, current camera frame → reference frame, m); the inlier mask over the correspondences;
+    success (enough inliers); RMS stereo reprojection error of the inliers (px); ``covariance`` (6×6) of ξ in
+    ``T_ref_cur · exp(ξ)``, ξ = (ρ [m], φ [rad]) in the current camera frame, for a nominal 1 px noise (infinite
+    when the inliers do not constrain the pose).
+    """
+
+    T_ref_cur: NDArray[np.float64]
+    inliers: NDArray[np.bool_]
+    success: bool
+    rms_px: float
+    covariance: NDArray[np.float64] = field(default_factory=lambda: np.full((6, 6), np.inf))
+
+    @property
+    def num_inliers(self) -> int:
+        return int(np.count_nonzero(self.inliers))
+
+    @property
+    def position_std_m(self) -> float:
+        """Largest standard deviation of the camera position (m; the square root of the largest eigenvalue of
+        the translation block of the covariance)."""
+        c = self.covariance[:3, :3]
+        if not np.all(np.isfinite(c)):
+            return math.inf
+        return float(math.sqrt(max(0.0, float(np.linalg.eigvalsh(0.5 * (c + c.T))[-1]))))
+
+
+@dataclass(frozen=True)
+class VoResult:
+    """One VO step: ``T_prev_cur`` (current left camera frame → previous one, m), matches and inliers, success.
+
+    On the first frame (no previous one) ``T_prev_cur`` is the identity and ``first`` is set; on a failure it is
+    the constant-velocity prediction (``success`` False)."""
+
+    T_prev_cur: NDArray[np.float64]
+    success: bool
+    num_matches: int
+    num_inliers: int
+    guided: bool
+    first: bool = False
+    rms_px: float = field(default=float("nan"))
+
+
+# --------------------------------------------------------------------------------------------------------------
+# Helpers
+
+
+def max_descriptor_distance(kind: str, orb: float, sift: float) -> float:
+    """The configured largest descriptor distance for a descriptor ``kind`` (``"orb"`` or ``"sift"``)."""
+    if kind == "orb":
+        return orb
+    if kind == "sift":
+        return sift
+    raise VtrInputError(f"unknown descriptor kind {kind!r}")
+
+
+def _invert(T: NDArray[np.float64]) -> NDArray[np.float64]:
+    R, t = T[:3, :3], T[:3, 3]
+    out = np.eye(4)
+    out[:3, :3] = R.T
+    out[:3, 3] = -R.T @ t
+    return out
+
+
+def project(
+    points_ref: NDArray[np.float64], T_ref_cur: NDArray[np.float64], K: NDArray[np.float64], min_depth_m: float = 0.05
+) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+    """Pixels (N, 2) of reference points seen from the camera at ``T_ref_cur``, and the mask of points in front
+    of it (depth ≥ ``min_depth_m``); pixels of the others are meaningless."""
+    T_cur_ref = _invert(T_ref_cur)
+    p = points_ref @ T_cur_ref[:3, :3].T + T_cur_ref[:3, 3]
+    z = p[:, 2]
+    front = z >= min_depth_m
+    zs = np.where(front, z, 1.0)
+    uv = np.stack([K[0, 0] * p[:, 0] / zs + K[0, 2], K[1, 1] * p[:, 1] / zs + K[1, 2]], axis=1)
+    return uv, front
+
+
+def _exp_se3(delta: NDArray[np.float64]) -> NDArray[np.float64]:
+    """exp of a twist (ρ, φ) as a 4×4 transform (Rodrigues; the same map as :func:`lightfast.geometry.se3_exp`,
+    without its input validation, for the inner loop of the refinement)."""
+    rho, phi = delta[:3], delta[3:]
+    theta = math.sqrt(float(phi @ phi))
+    Kx = np.array([[0.0, -phi[2], phi[1]], [phi[2], 0.0, -phi[0]], [-phi[1], phi[0], 0.0]])
+    if theta < 1e-6:
+        A, Bc, C = 1.0, 0.5, 1.0 / 6.0
+    else:
+        A = math.sin(theta) / theta
+        Bc = (1.0 - math.cos(theta)) / theta**2
+        C = (theta - math.sin(theta)) / theta**3
+    K2 = Kx @ Kx
+    T = np.eye(4)
+    T[:3, :3] = np.eye(3) + A * Kx + Bc * K2
+    T[:3, 3] = (np.eye(3) + Bc * Kx + C * K2) @ rho
+    return T
+
+
+def _stereo_residuals(
+    T_cur_ref: NDArray[np.float64], P: NDArray[np.float64], meas: NDArray[np.float64], K: NDArray[np.float64],
+    fb: float,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_]]:
+    """Residuals (N, 3) predicted − measured (u, v, d) of reference points ``P`` under ``T_cur_ref``, the
+    points in the current frame (N, 3) and the mask of points in front of the camera."""
+    p = P @ T_cur_ref[:3, :3].T + T_cur_ref[:3, 3]
+    z = p[:, 2]
+    front = z > 1e-6
+    zs = np.where(front, z, 1.0)
+    pred = np.stack([K[0, 0] * p[:, 0] / zs + K[0, 2], K[1, 1] * p[:, 1] / zs + K[1, 2], fb / zs], axis=1)
+    return pred - meas, p, front
+
+
+def _normal_equations(
+    p: NDArray[np.float64], r: NDArray[np.float64], K: NDArray[np.float64], fb: float
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """JᵀJ and Jᵀr of the stereo residuals for the left perturbation T_cur_ref ← exp(δ) T_cur_ref, δ = (ρ, φ)."""
+    X, Y, Z = p[:, 0], p[:, 1], p[:, 2]
+    iz = 1.0 / Z
+    iz2 = iz * iz
+    n = p.shape[0]
+    Jp = np.zeros((n, 3, 3))
+    Jp[:, 0, 0] = K[0, 0] * iz
+    Jp[:, 0, 2] = -K[0, 0] * X * iz2
+    Jp[:, 1, 1] = K[1, 1] * iz
+    Jp[:, 1, 2] = -K[1, 1] * Y * iz2
+    Jp[:, 2, 2] = -fb * iz2
+    # dp/dδ = [I | -hat(p)]
+    minus_hat = np.zeros((n, 3, 3))
+    minus_hat[:, 0, 1], minus_hat[:, 0, 2] = Z, -Y
+    minus_hat[:, 1, 0], minus_hat[:, 1, 2] = -Z, X
+    minus_hat[:, 2, 0], minus_hat[:, 2, 1] = Y, -X
+    J = np.concatenate([Jp, Jp @ minus_hat], axis=2)  # (n, 3, 6)
+    Jf = J.reshape(-1, 6)
+    return Jf.T @ Jf, Jf.T @ r.reshape(-1)
+
+
+def refine_pose_stereo(
+    points_ref: NDArray[np.float64], uvd_cur: NDArray[np.float64], camera: StereoCamera,
+    T_ref_cur: NDArray[np.float64], iterations: int = 10,
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Levenberg–Marquardt on the stereo reprojection residuals (u, v, d) of the given correspondences
+    (``uvd_cur``: left pixel and effective disparity, (N, 3)). Returns the refined ``T_ref_cur`` and the 6×6
+    covariance of ξ in ``T_ref_cur · exp(ξ)`` (nominal 1 px noise; infinite if singular)."""
+    K, fb = camera.K, camera.fb
+    T = _invert(T_ref_cur)  # T_cur_ref
+    r, p, front = _stereo_residuals(T, points_ref, uvd_cur, K, fb)
+    cost = float(np.sum(r[front] ** 2)) if front.all() else math.inf
+    lam = 1e-3
+    for _ in range(iterations):
+        if not front.all():
+            break
+        H, g = _normal_equations(p, r, K, fb)
+        try:
+            delta = -np.linalg.solve(H + lam * np.diag(np.diag(H) + 1e-12), g)
+        except np.linalg.LinAlgError:
+            break
+        T_new = _exp_se3(delta) @ T
+        r_new, p_new, front_new = _stereo_residuals(T_new, points_ref, uvd_cur, K, fb)
+        cost_new = float(np.sum(r_new**2)) if front_new.all() else math.inf
+        if cost_new < cost:
+            converged = cost - cost_new <= 1e-9 * cost or float(np.linalg.norm(delta)) < 1e-10
+            T, r, p, front, cost = T_new, r_new, p_new, front_new, cost_new
+            lam = max(lam / 10.0, 1e-9)
+            if converged:
+                break
+        else:
+            lam *= 10.0
+            if lam > 1e6:
+                break
+    cov = np.full((6, 6), np.inf)
+    if front.all() and points_ref.shape[0] >= 3:
+        H, _ = _normal_equations(p, r, K, fb)
+        if np.linalg.cond(H) < 1e14:
+            cov = NOMINAL_SIGMA_PX**2 * np.linalg.inv(H)
+    return _invert(T), cov
+
+
+def _kabsch_batch(P: NDArray[np.float64], Q: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Rigid transforms (H, 4, 4) with Q ≈ R P + t for batches of point triples P, Q (H, 3, 3) (rows = points)."""
+    cp, cq = P.mean(axis=1, keepdims=True), Q.mean(axis=1, keepdims=True)
+    Hm = np.swapaxes(P - cp, 1, 2) @ (Q - cq)  # (H, 3, 3) = Σ p qᵀ
+    U, _, Vt = np.linalg.svd(Hm)
+    d = np.sign(np.linalg.det(np.swapaxes(Vt, 1, 2) @ np.swapaxes(U, 1, 2)))
+    D = np.ones((P.shape[0], 3))
+    D[:, 2] = np.where(d == 0, 1.0, d)
+    R = np.swapaxes(Vt, 1, 2) @ (D[:, :, None] * np.swapaxes(U, 1, 2))
+    T = np.zeros((P.shape[0], 4, 4))
+    T[:, :3, :3] = R
+    T[:, :3, 3] = cq[:, 0] - (R @ cp[:, 0, :, None])[..., 0]
+    T[:, 3, 3] = 1.0
+    return T
+
+
+# --------------------------------------------------------------------------------------------------------------
+# Matching and pose
+
+
+def _match_candidates(
+    descriptors_ref: NDArray[np.generic], descriptors_cur: NDArray[np.generic], ia: NDArray[np.intp],
+    ib: NDArray[np.intp], kind: str, ratio: float, mutual: bool,
+) -> tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.float32]]:
+    """Nearest neighbour + ratio + mutual over candidate pairs, like :func:`~lightfast.vtr.stereo.match_descriptors`
+    with ``candidates`` but faster for the many pairs of guided matching (64-bit popcount, one integer sort)."""
+    if kind == "orb" and descriptors_ref.shape[1] % 8 == 0:
+        wa = np.ascontiguousarray(descriptors_ref).view(np.uint64)
+        wb = np.ascontiguousarray(descriptors_cur).view(np.uint64)
+        d = np.bitwise_count(wa[ia] ^ wb[ib]).sum(axis=1).astype(np.int64)
+        scale = 1
+    else:
+        d_f = pair_distances(descriptors_ref, descriptors_cur, ia, ib, kind)
+        scale = 1000  # integer keys with 1e-3 resolution
+        d = np.rint(d_f.astype(np.float64) * scale).astype(np.int64)
+    big = int(d.max()) + 2 if d.size else 2
+    order = np.argsort(ia.astype(np.int64) * big + d)
+    ia_s, ib_s, d_s = ia[order], ib[order], d[order]
+    first = np.flatnonzero(np.r_[True, ia_s[1:] != ia_s[:-1]])
+    nxt = first + 1
+    has_second = nxt < ia_s.size
+    has_second[has_second] = ia_s[nxt[has_second]] == ia_s[first[has_second]]
+    d2 = np.full(first.size, np.inf)
+    d2[has_second] = d_s[nxt[has_second]]
+    i, j, d1 = ia_s[first], ib_s[first], d_s[first].astype(np.float64)
+    keep = d1 < ratio * d2
+    if mutual:
+        order_b = np.argsort(ib.astype(np.int64) * big + d)
+        ib_b = ib[order_b]
+        firsts_b = order_b[np.r_[True, ib_b[1:] != ib_b[:-1]]]
+        best_a_of_b = np.full(len(descriptors_cur), -1, np.intp)
+        best_a_of_b[ib[firsts_b]] = ia[firsts_b]
+        keep &= best_a_of_b[j] == i
+    return i[keep], j[keep], (d1[keep] / scale).astype(np.float32)
+
+
+def match_landmarks(
+    points_ref: NDArray[np.float64],
+    descriptors_ref: NDArray[np.generic],
+    uv_cur: NDArray[np.float32],
+    descriptors_cur: NDArray[np.generic],
+    kind: str,
+    *,
+    K: NDArray[np.float64] | None = None,
+    T_ref_cur: NDArray[np.float64] | None = None,
+    radius_px: float = 0.0,
+    ratio: float = 0.8,
+    mutual: bool = True,
+    max_distance: float = math.inf,
+) -> tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.float32]]:
+    """Descriptor matches reference landmark → current keypoint (step 1 of the module docstring).
+
+    Unguided (all pairs, :func:`~lightfast.vtr.stereo.match_descriptors`) unless ``T_ref_cur``, ``K`` and
+    ``radius_px > 0`` are given: then only pairs whose reference point projects (in front of the camera) within
+    ``radius_px`` of the current keypoint compete. At most one reference landmark per current keypoint (the
+    nearest descriptor) is kept. Returns indices into the reference and current sets and the distances.
+    """
+    n, m = len(descriptors_ref), len(descriptors_cur)
+    empty = (np.zeros(0, np.intp), np.zeros(0, np.intp), np.zeros(0, np.float32))
+    if n == 0 or m == 0:
+        return empty
+    if descriptors_ref.ndim != 2 or descriptors_cur.ndim != 2 or descriptors_ref.shape[1] != descriptors_cur.shape[1]:
+        raise VtrInputError(f"descriptor shapes {descriptors_ref.shape} and {descriptors_cur.shape} do not match")
+    if T_ref_cur is not None and radius_px > 0.0:
+        if K is None:
+            raise VtrInputError("guided matching needs the camera matrix K")
+        uv_pred, front = project(points_ref, T_ref_cur, K)
+        idx_front = np.flatnonzero(front)
+        if idx_front.size == 0:
+            return empty
+        pairs = cKDTree(uv_pred[idx_front]).sparse_distance_matrix(
+            cKDTree(np.asarray(uv_cur, np.float64)), radius_px, output_type="ndarray"
+        )
+        if pairs.size == 0:
+            return empty
+        ia = idx_front[pairs["i"].astype(np.intp)]
+        ib = pairs["j"].astype(np.intp)
+        i_ref, i_cur, dist = _match_candidates(descriptors_ref, descriptors_cur, ia, ib, kind, ratio, mutual)
+    else:
+        i_ref, i_cur, dist = match_descriptors(descriptors_ref, descriptors_cur, kind, ratio=ratio, mutual=mutual)
+    keep = dist <= max_distance
+    i_ref, i_cur, dist = i_ref[keep], i_cur[keep], dist[keep]
+    if not mutual and i_cur.size:  # one reference landmark per current keypoint: the nearest descriptor
+        order = np.lexsort((dist, i_cur))
+        first = order[np.r_[True, i_cur[order][1:] != i_cur[order][:-1]]]
+        i_ref, i_cur, dist = i_ref[first], i_cur[first], dist[first]
+    return i_ref, i_cur, dist
+
+
+def estimate_pose_stereo(
+    points_ref: ArrayLike,
+    uv_cur: ArrayLike,
+    disparity_cur: ArrayLike,
+    camera: StereoCamera,
+    *,
+    threshold_px: float = 2.0,
+    iterations: int = 500,
+    confidence: float = 0.999,
+    min_inliers: int = 6,
+    seed: int = 0,
+) -> PoseEstimate:
+    """Pose of the current camera in the reference frame from 3-D reference points and their current stereo
+    measurements (left pixel, effective disparity = fb / Z): 3-point 3-D–3-D RANSAC scored by the stereo
+    reprojection error, then Levenberg–Marquardt on the inliers (steps 2–3 of the module docstring).
+
+    ``success`` needs at least ``max(min_inliers, 3)`` inliers. A failed estimate has ``T_ref_cur`` = identity
+    and an empty inlier mask. Deterministic for a given ``seed``. Never raises for degenerate data (too few
+    points, no consensus); raises :class:`VtrInputError` for inconsistent shapes.
+    """
+    P = np.ascontiguousarray(np.asarray(points_ref, np.float64).reshape(-1, 3))
+    uv = np.asarray(uv_cur, np.float64).reshape(-1, 2)
+    d = np.asarray(disparity_cur, np.float64).reshape(-1)
+    n = P.shape[0]
+    if uv.shape[0] != n or d.shape[0] != n:
+        raise VtrInputError(f"{n} reference points but {uv.shape[0]} pixels and {d.shape[0]} disparities")
+    failed = PoseEstimate(np.eye(4), np.zeros(n, bool), False, float("nan"))
+    need = max(min_inliers, 3)
+    ok = np.all(np.isfinite(P), axis=1) & np.all(np.isfinite(uv), axis=1) & np.isfinite(d) & (d > 1e-6)
+    idx = np.flatnonzero(ok)
+    if idx.size < need:
+        return failed
+    K, fb = camera.K, camera.fb
+    meas = np.column_stack([uv, d])
+    # current stereo points (left camera frame) for the 3-D–3-D minimal solver
+    z = fb / d[idx]
+    Q = np.column_stack([(uv[idx, 0] - K[0, 2]) * z / K[0, 0], (uv[idx, 1] - K[1, 2]) * z / K[1, 1], z])
+    Pv, Mv = P[idx], meas[idx]
+    m = idx.size
+    rng = np.random.default_rng(seed)
+    thr2 = threshold_px * threshold_px
+    best_count, best_T = 0, None
+    needed = float(iterations)
+    done = 0
+    log_fail = math.log(1.0 - confidence)
+    while done < min(needed, iterations):
+        h = min(_BATCH, iterations - done)
+        done += h
+        s = rng.integers(0, m, size=(h, 3))
+        distinct = (s[:, 0] != s[:, 1]) & (s[:, 0] != s[:, 2]) & (s[:, 1] != s[:, 2])
+        s = s[distinct]
+        if s.shape[0] == 0:
+            continue
+        Ps, Qs = Pv[s], Q[s]
+        area = np.linalg.norm(np.cross(Ps[:, 1] - Ps[:, 0], Ps[:, 2] - Ps[:, 0]), axis=1)
+        s, Ps, Qs = s[area > 1e-6], Ps[area > 1e-6], Qs[area > 1e-6]
+        if s.shape[0] == 0:
+            continue
+        Ts = _kabsch_batch(Ps, Qs)  # T_cur_ref hypotheses
+        p = np.einsum("hij,nj->hni", Ts[:, :3, :3], Pv) + Ts[:, None, :3, 3]
+        zz = p[..., 2]
+        front = zz > 1e-6
+        zs = np.where(front, zz, 1.0)
+        e = (K[0, 0] * p[..., 0] / zs + K[0, 2] - Mv[None, :, 0]) ** 2
+        e += (K[1, 1] * p[..., 1] / zs + K[1, 2] - Mv[None, :, 1]) ** 2
+        e += (fb / zs - Mv[None, :, 2]) ** 2
+        counts = np.count_nonzero(front & (e <= thr2), axis=1)
+        k = int(np.argmax(counts))
+        if counts[k] > best_count:
+            best_count, best_T = int(counts[k]), Ts[k]
+            w = best_count / m
+            p_good = w**3
+            needed = 0.0 if p_good >= 1.0 else (log_fail / math.log(1.0 - p_good) if p_good > 0 else math.inf)
+    if best_T is None or best_count < need:
+        return failed
+    T_ref_cur = _invert(best_T)
+    inliers = np.zeros(n, bool)
+    cov = np.full((6, 6), np.inf)
+    for _ in range(3):  # select inliers, refine on them; until the inlier set is stable
+        r, _, front = _stereo_residuals(_invert(T_ref_cur), P, meas, K, fb)
+        new = ok & front & (np.sum(r * r, axis=1) <= thr2)
+        if np.count_nonzero(new) < 3:
+            return failed
+        if np.array_equal(new, inliers):
+            break
+        inliers = new
+        T_ref_cur, cov = refine_pose_stereo(P[inliers], meas[inliers], camera, T_ref_cur)
+    r, _, _ = _stereo_residuals(_invert(T_ref_cur), P[inliers], meas[inliers], K, fb)
+    rms = float(np.sqrt(np.mean(np.sum(r * r, axis=1))))
+    count = int(np.count_nonzero(inliers))
+    if not np.all(np.isfinite(T_ref_cur)):
+        return failed
+    return PoseEstimate(T_ref_cur, inliers, count >= need, rms, cov)
+
+
+# --------------------------------------------------------------------------------------------------------------
+# Frame-to-frame VO
+
+
+class VisualOdometry:
+    """Frame-to-frame stereo VO on the greyscale landmarks (paper §IV-B; Fig. 3 with "the most recent view").
+
+    :meth:`process` takes the current frame's grey :class:`~lightfast.vtr.stereo.StereoFeatures` and the stereo
+    camera; the previous frame's landmarks are the reference. Not thread-safe (keeps the previous frame).
+    """
+
+    def __init__(self, config: VisualOdometryConfig | None = None) -> None:
+        self.config = config or VisualOdometryConfig()
+        self._prev: StereoFeatures | None = None
+        self._velocity: NDArray[np.float64] = np.eye(4)  # last successful T_prev_cur (constant-velocity prior)
+
+    def reset(self) -> None:
+        """Forget the previous frame (the next one starts a new VO chain)."""
+        self._prev = None
+        self._velocity = np.eye(4)
+
+    @property
+    def prediction(self) -> NDArray[np.float64]:
+        """The constant-velocity prediction of the next ``T_prev_cur`` (identity before the first success)."""
+        return self._velocity.copy()
+
+    def estimate(
+        self, prev: StereoFeatures, cur: StereoFeatures, camera: StereoCamera,
+        T_prev_cur_prior: NDArray[np.float64] | None = None,
+    ) -> VoResult:
+        """Motion between two frames without touching the state: guided by ``T_prev_cur_prior`` when given
+        (and ``match_radius_px > 0``), unguided as the fallback."""
+        c = self.config
+        if prev.kind != cur.kind:
+            raise VtrInputError(f"cannot match {prev.kind} features with {cur.kind} features")
+        max_d = max_descriptor_distance(cur.kind, c.orb_max_distance, c.sift_max_distance)
+        attempts = [True, False] if (T_prev_cur_prior is not None and c.match_radius_px > 0) else [False]
+        disparity = camera.effective_disparity(cur)
+        result = VoResult(self._velocity.copy(), False, 0, 0, False)
+        for guided in attempts:
+            i_ref, i_cur, _ = match_landmarks(
+                prev.points, prev.descriptors, cur.uv_left, cur.descriptors, cur.kind, K=camera.K,
+                T_ref_cur=T_prev_cur_prior if guided else None, radius_px=c.match_radius_px if guided else 0.0,
+                ratio=c.ratio, mutual=c.mutual, max_distance=max_d,
+            )
+            est = estimate_pose_stereo(
+                prev.points[i_ref], cur.uv_left[i_cur], disparity[i_cur], camera, threshold_px=c.ransac_threshold_px,
+                iterations=c.ransac_iterations, confidence=c.ransac_confidence, min_inliers=c.min_inliers,
+            )
+            step_m = float(np.linalg.norm(est.T_ref_cur[:3, 3]))
+            success = est.success and step_m <= c.max_translation_m
+            if est.success and not success:
+                log.debug("VO rejected: %.2f m between frames exceeds %.2f m", step_m, c.max_translation_m)
+            if success:
+                return VoResult(est.T_ref_cur, True, len(i_ref), est.num_inliers, guided, rms_px=est.rms_px)
+            result = VoResult(self._velocity.copy(), False, len(i_ref), est.num_inliers, guided)
+        return result
+
+    def process(self, features: StereoFeatures, camera: StereoCamera) -> VoResult:
+        """One VO step with the current frame's grey landmarks.
+
+        On failure the constant-velocity prediction is returned as ``T_prev_cur`` (``success`` False) and the
+        current frame still becomes the reference of the next step."""
+        prev, self._prev = self._prev, features
+        if prev is None:
+            return VoResult(np.eye(4), False, 0, 0, False, first=True)
+        result = self.estimate(prev, features, camera, self._velocity)
+        if result.success:
+            self._velocity = result.T_prev_cur.copy()
+        else:
+            log.debug("VO failed (%d matches, %d inliers); propagating the constant-velocity prediction",
+                      result.num_matches, result.num_inliers)
+        return result

@@ -1,0 +1,596 @@
+"""Teach & repeat of colour-constant stereo VT&R (paper §IV-B, IV-C) on a synthetic textured scene.
+
+Scene: a 12 m straight "corridor" (a textured ground plane 1 m below the camera, two textured walls at x = ±3 m,
+a far wall at z = 40 m) ray-cast per pixel (2× supersampled, linear radiance, exposure, Gaussian read noise,
+8-bit) for a rectified stereo pair (320×240, f = 250 px, 24 cm baseline like the Bumblebee XB3). Surfaces have
+multi-scale luminance and chroma texture (log-reflectance per channel).
+
+Lighting. Per surface point the illuminant is a black body in Wien's approximation seen through the narrow-band
+channels at the peak wavelengths of :class:`~lightfast.vtr.ColorConstantConfig` (615/530/460 nm), i.e. the model
+of the paper's §III (Eq. 5): log E_c = log I − C2 / (λ_c T) − 5 log λ_c. A shadow-like pattern fixed to the
+surfaces lowers the colour temperature T (at constant Planck intensity I) from ``T_lit`` to ``T_dim``; the teach
+and the repeat have *different* patterns ("shadows opposite to the map's") and different ``T_lit``/``T_dim``.
+
+Why the physics says greyscale fails and F_v/F_r do not (checked in
+:func:`test_lighting_change_cancels_in_color_constant_images_only`): F = log R2 − α log R1 − β log R3 with β from
+Eq. 10 has zero weight on 1/T (the temperature constraint of Eq. 7), so at constant I the pattern cancels in F_v
+and F_r exactly (up to the paper's rounding of β: ≤ 0.01 log units); greyscale sees the pattern as a gain of
+0.3–0.45 (shadows of −0.8 to −1.2 in log, against a luminance texture of 0.3): features and descriptors on shadow
+edges change with the pattern. What this test does *not* show: real shadows change the illuminant *intensity*
+too (skylight vs sun + sky), which F_v keeps with weight 1 − α − β = −0.06 and F_r with −0.6 (see
+:mod:`lightfast.vtr.color_constant`); a realistic sun/sky shadow pattern is not part of this test (measured
+separately: with it greyscale still fails, fused localizes most frames with fewer F_v inliers and F_r adds few).
+"""
+from __future__ import annotations
+
+import hashlib
+import itertools
+import json
+import zipfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from lightfast.vtr import (
+    ColorConstantConfig,
+    MapCorruptError,
+    MapError,
+    MapExistsError,
+    MapNotFoundError,
+    MapStore,
+    MapVersionError,
+    RepeatConfig,
+    RepeatPipeline,
+    RepeatResult,
+    SourceFrontEnd,
+    StereoCamera,
+    StereoConfig,
+    TeachConfig,
+    TeachPipeline,
+    VtrError,
+    VtrInputError,
+    color_constant,
+    estimate_pose_stereo,
+    source_weights,
+)
+
+W, H, F, B = 320, 240, 250.0, 0.24
+K = np.array([[F, 0.0, (W - 1) / 2], [0.0, F, (H - 1) / 2], [0.0, 0.0, 1.0]])
+P_LEFT = np.c_[K, np.zeros(3)]
+P_RIGHT = np.c_[K, [-F * B, 0.0, 0.0]]
+C2_UM_K = 14388.0  # second radiation constant, µm·K
+PEAK_UM = np.array([0.615, 0.530, 0.460])  # R, G, B: the peak wavelengths of ColorConstantConfig, µm
+SUPERSAMPLE = 2  # 2 halves the aliasing of far texture but quadruples the rendering time
+EXPOSURE = 360.0  # 8-bit levels per unit radiance (lit mean ~ 125)
+NOISE_SIGMA = 0.7  # read noise, 8-bit levels
+SKY_RGB = (2.0, 2.0, 2.2)  # above the walls: saturated, no features
+
+TEACH_Z = np.round(np.arange(0.0, 10.81, 0.6), 3)  # teach frames along the path, m
+REPEAT_Z = np.round(np.arange(0.2, 10.5, 0.5), 3)  # repeat frames, m
+REPEAT_X, REPEAT_YAW_DEG = 0.3, 2.0  # lateral offset and heading change of the repeat path
+STAMP_STEP_NS = 100_000_000
+#: (pattern seed, T_lit, T_dim) per lighting condition; "changed" is the repeat under another illuminant pattern
+LIGHTING = {"teach": (1, 5500.0, 4400.0), "changed": (2, 4800.0, 3900.0)}
+#: Tolerances of the localized pose relative to the taught path (true keyframe pose → true camera pose)
+TOL_MEDIAN_M, TOL_MAX_M, TOL_ROT_DEG = 0.03, 0.10, 0.5
+
+
+# --------------------------------------------------------------------------------------------------------------
+# Scene
+
+
+def wien_gains(T_K: np.ndarray | float) -> np.ndarray:
+    """(…, 3) R, G, B responses of a Wien source of temperature ``T_K`` at unit Planck intensity through
+    narrow-band channels at ``PEAK_UM``, relative to green at 5500 K."""
+    T = np.asarray(T_K, float)[..., None]
+    e = PEAK_UM**-5 * np.exp(-C2_UM_K / (PEAK_UM * T))
+    return e / (PEAK_UM[1] ** -5 * np.exp(-C2_UM_K / (PEAK_UM[1] * 5500.0)))
+
+
+def smooth_noise(rng: np.random.Generator, h: int, w: int, scales: tuple[tuple[int, float], ...]) -> np.ndarray:
+    out = np.zeros((h, w), np.float32)
+    for s, a in scales:
+        n = rng.normal(size=(h // s + 3, w // s + 3)).astype(np.float32)
+        out += a * cv2.resize(n, ((w // s + 3) * s, (h // s + 3) * s), interpolation=cv2.INTER_CUBIC)[:h, :w]
+    return out / out.std()
+
+
+class Plane:
+    """A textured rectangle origin + [0, size_u]·eu + [0, size_v]·ev with 2 cm texels."""
+
+    def __init__(self, origin, eu, ev, size_u: float, size_v: float, seed: int, texel: float = 0.02) -> None:
+        self.o, self.eu, self.ev = (np.asarray(x, float) for x in (origin, eu, ev))
+        self.n = np.cross(self.eu, self.ev)
+        self.texel, self.w, self.h, self.seed = texel, int(size_u / texel), int(size_v / texel), seed
+        rng = np.random.default_rng(seed)
+        scales = ((2, 1.0), (6, 0.7), (20, 0.5))
+        lum = smooth_noise(rng, self.h, self.w, scales)
+        chroma = np.stack([smooth_noise(rng, self.h, self.w, scales) for _ in range(3)], -1)
+        chroma -= chroma.mean(-1, keepdims=True)
+        self.albedo = np.exp(np.log(0.35) + 0.30 * lum[..., None] + 0.25 * chroma).astype(np.float32)
+
+    def pattern(self, seed: int, scale_m: float = 0.4, soft: float = 0.3) -> np.ndarray:
+        """Shadow-like pattern in [0, 1] fixed to the surface (1: lit)."""
+        s = max(1, int(scale_m / self.texel))
+        n = smooth_noise(np.random.default_rng(seed * 1000 + self.seed), self.h, self.w, ((s, 1.0), (3 * s, 0.7)))
+        return np.clip(n / soft + 0.5, 0.0, 1.0)
+
+    def radiance(self, seed: int, T_lit: float, T_dim: float) -> np.ndarray:
+        """Albedo × illuminant, 1/T interpolated between T_lit (pattern 1) and T_dim (pattern 0)."""
+        s = self.pattern(seed)
+        T = 1.0 / (s / T_lit + (1.0 - s) / T_dim)
+        return (self.albedo * wien_gains(T)).astype(np.float32)
+
+
+def _sample(tex: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Bilinear samples (n, 3) of ``tex`` at texel coordinates (a, b) (cv2.remap on a padded 2-D block)."""
+    n, cols = a.size, 1024
+    rows = -(-n // cols)
+    pad = rows * cols - n
+    ma = np.pad(a.astype(np.float32), (0, pad)).reshape(rows, cols)
+    mb = np.pad(b.astype(np.float32), (0, pad)).reshape(rows, cols)
+    out = cv2.remap(tex, ma, mb, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    return out.reshape(-1, 3)[:n]
+
+
+class Scene:
+    """The corridor of the module docstring, rendered for a rectified stereo camera of ``width`` × ``height`` px,
+    focal length ``f_px`` and baseline ``B`` (left camera: principal point at the image centre, ``P_left``,
+    ``P_right``); also used by ``benchmarks/vtr_localization.py`` at 640×480."""
+
+    def __init__(self, width: int = W, height: int = H, f_px: float = F, supersample: int = SUPERSAMPLE) -> None:
+        self.width, self.height, self.supersample = width, height, supersample
+        self.K = np.array([[f_px, 0.0, (width - 1) / 2], [0.0, f_px, (height - 1) / 2], [0.0, 0.0, 1.0]])
+        self.P_left = np.c_[self.K, np.zeros(3)]
+        self.P_right = np.c_[self.K, [-f_px * B, 0.0, 0.0]]
+        self.planes = [
+            Plane((-4, 1.0, -2), (1, 0, 0), (0, 0, 1), 8, 42, 1),  # ground, 1 m below the camera (y down)
+            Plane((-3, -2.5, -2), (0, 0, 1), (0, 1, 0), 42, 3.5, 2),  # left wall
+            Plane((3, -2.5, -2), (0, 0, 1), (0, 1, 0), 42, 3.5, 3),  # right wall
+            Plane((-4, -2.5, 40), (1, 0, 0), (0, 1, 0), 8, 3.5, 4),  # far wall
+        ]
+        self.textures = {name: [p.radiance(*args) for p in self.planes] for name, args in LIGHTING.items()}
+        ss, Km = supersample, self.K
+        u, v = np.meshgrid(np.arange(width * ss) + 0.5, np.arange(height * ss) + 0.5)
+        # pixel rays (x, y, 1) in the camera frame
+        self.ray_x = ((u / ss - 0.5 - Km[0, 2]) / Km[0, 0]).reshape(-1).astype(np.float32)
+        self.ray_y = ((v / ss - 0.5 - Km[1, 2]) / Km[1, 1]).reshape(-1).astype(np.float32)
+
+    def _ray_dot(self, a: np.ndarray) -> np.ndarray:
+        """ray_world · axis = ray_cam · (Rᵀ axis) per pixel (no big matrix product: a threaded BLAS call crawls
+        on a loaded machine)."""
+        a = np.asarray(a, np.float32)
+        return a[0] * self.ray_x + a[1] * self.ray_y + a[2]
+
+    def render(self, lighting: str, T_world_cam: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        R, o = T_world_cam[:3, :3], T_world_cam[:3, 3]
+        n_px = self.ray_x.shape[0]
+        best = np.full(n_px, np.inf, np.float32)
+        img = np.broadcast_to(np.asarray(SKY_RGB, np.float32), (n_px, 3)).copy()
+        for p, tex in zip(self.planes, self.textures[lighting], strict=True):
+            dn, du, dv = (self._ray_dot(R.T @ axis) for axis in (p.n, p.eu, p.ev))
+            with np.errstate(divide="ignore", invalid="ignore"):
+                t = np.float32((p.o - o) @ p.n) / dn
+            a = (np.float32((o - p.o) @ p.eu) + t * du) * np.float32(1.0 / p.texel)
+            b = (np.float32((o - p.o) @ p.ev) + t * dv) * np.float32(1.0 / p.texel)
+            ok = (t > 0) & (t < best) & (a >= 0) & (a <= p.w - 1) & (b >= 0) & (b <= p.h - 1)
+            if ok.any():
+                img[ok] = _sample(tex, a[ok], b[ok])
+                best[ok] = t[ok]
+        ss = self.supersample
+        img = img.reshape(self.height * ss, self.width * ss, 3)
+        img = cv2.resize(img, (self.width, self.height), interpolation=cv2.INTER_AREA) * EXPOSURE
+        img += rng.normal(0.0, NOISE_SIGMA, img.shape).astype(np.float32)
+        return np.clip(np.rint(img), 0, 255).astype(np.uint8)
+
+    def stereo(self, lighting: str, T_world_left: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray, ...]:
+        T_right = T_world_left.copy()
+        T_right[:3, 3] += T_world_left[:3, :3] @ np.array([B, 0.0, 0.0])
+        return self.render(lighting, T_world_left, rng), self.render(lighting, T_right, rng)
+
+
+def pose(x: float, z: float, yaw_deg: float = 0.0) -> np.ndarray:
+    """Camera (optical frame: x right, y down, z forward) at (x, 0, z), turned by ``yaw_deg`` about y."""
+    a = np.radians(yaw_deg)
+    T = np.eye(4)
+    T[:3, :3] = [[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]]
+    T[:3, 3] = (x, 0.0, z)
+    return T
+
+
+def rotation_deg(T: np.ndarray) -> float:
+    return float(np.degrees(np.arccos(np.clip((np.trace(T[:3, :3]) - 1) / 2, -1, 1))))
+
+
+# --------------------------------------------------------------------------------------------------------------
+# Fixtures: one teach, the repeat frames' features per lighting, the repeat runs per (lighting, mode)
+
+
+@dataclass
+class Taught:
+    path: Path
+    teach_map: object
+    features: list  # per teach frame: dict source -> StereoFeatures
+    kf_pose: list  # true world pose of each keyframe
+
+
+@pytest.fixture(scope="module")
+def scene() -> Scene:
+    return Scene()
+
+
+@pytest.fixture(scope="module")
+def taught(scene: Scene, tmp_path_factory) -> Taught:
+    path = tmp_path_factory.mktemp("vtr") / "map"
+    rng = np.random.default_rng(10)
+    teach = TeachPipeline(path, TeachConfig(keyframe_distance_m=1.0))
+    feats = []
+    for i, z in enumerate(TEACH_Z):
+        left, right = scene.stereo("teach", pose(0.0, z), rng)
+        features = teach.front.process(left, right, P_LEFT, P_RIGHT)
+        feats.append(features)
+        teach.step_features(i * STAMP_STEP_NS, features, P_LEFT, P_RIGHT, (W, H))
+    teach_map = teach.finish()
+    kf_pose = [pose(0.0, TEACH_Z[kf.stamp_ns // STAMP_STEP_NS]) for kf in teach_map.keyframes]
+    return Taught(path, teach_map, feats, kf_pose)
+
+
+@pytest.fixture(scope="module")
+def repeat_features(scene: Scene) -> dict[str, list]:
+    """Front-end output (all three sources) of the repeat frames under the teach and the changed lighting."""
+    front = SourceFrontEnd(("grey", "fv", "fr"), StereoConfig(), ColorConstantConfig())
+    rng = np.random.default_rng(20)
+    out = {}
+    for lighting in ("teach", "changed"):
+        out[lighting] = [front.process(*scene.stereo(lighting, pose(REPEAT_X, z, REPEAT_YAW_DEG), rng), P_LEFT,
+                                       P_RIGHT) for z in REPEAT_Z]
+    return out
+
+
+def _repeat_config(mode: str, **kw) -> RepeatConfig:
+    return RepeatConfig(mode=mode, **({"match_radius_px": 25.0} | kw))  # 25 px at 320×240 ~ 50 px at 640×480
+
+
+@pytest.fixture(scope="module")
+def runs(taught: Taught, repeat_features):
+    cache: dict[tuple[str, str], list[RepeatResult]] = {}
+
+    def run(lighting: str, mode: str) -> list[RepeatResult]:
+        if (lighting, mode) not in cache:
+            # every mode starts at keyframe 0 (its window; the whole-map search is tested separately)
+            rp = RepeatPipeline(taught.teach_map, _repeat_config(mode, initial_keyframe=0))
+            cache[(lighting, mode)] = [rp.step_features(i * STAMP_STEP_NS, f, P_LEFT, P_RIGHT)
+                                       for i, f in enumerate(repeat_features[lighting])]
+        return cache[(lighting, mode)]
+
+    return run
+
+
+def pose_errors(taught: Taught, results: list[RepeatResult]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Translation (m) and rotation (deg) errors of the localized frames relative to the taught path, and the mask
+    of localized frames."""
+    t_err, r_err, loc = [], [], []
+    for z, res in zip(REPEAT_Z, results, strict=True):
+        loc.append(res.localized)
+        if not res.localized:
+            continue
+        truth = np.linalg.inv(taught.kf_pose[res.keyframe_index]) @ pose(REPEAT_X, z, REPEAT_YAW_DEG)
+        t_err.append(float(np.linalg.norm(res.T_kf_cam[:3, 3] - truth[:3, 3])))
+        r_err.append(rotation_deg(np.linalg.inv(truth) @ res.T_kf_cam))
+    return np.array(t_err), np.array(r_err), np.array(loc)
+
+
+def summary(results: list[RepeatResult]) -> str:
+    srcs = results[0].inliers_per_source.keys()
+    med = {s: int(np.median([r.inliers_per_source[s] for r in results])) for s in srcs}
+    return f"localized {sum(r.localized for r in results)}/{len(results)}, median inliers {med}"
+
+
+# --------------------------------------------------------------------------------------------------------------
+# Pose solver (shared by VO and localization)
+
+
+def _stereo_measurements(P_ref: np.ndarray, T_ref_cur: np.ndarray, rng: np.random.Generator, noise_px: float):
+    T_cur_ref = np.linalg.inv(T_ref_cur)
+    p = P_ref @ T_cur_ref[:3, :3].T + T_cur_ref[:3, 3]
+    uv = p[:, :2] / p[:, 2:] * F + K[:2, 2] + rng.normal(0, noise_px, (len(p), 2))
+    d = F * B / p[:, 2] + rng.normal(0, noise_px / 3, len(p))
+    return uv, d
+
+
+def test_stereo_pose_solver_recovers_motion_among_outliers():
+    rng = np.random.default_rng(3)
+    camera = StereoCamera.from_projections(P_LEFT, P_RIGHT)
+    n, n_out = 300, 150  # half of the correspondences are wrong
+    P_ref = np.c_[rng.uniform(-3, 3, n), rng.uniform(-1.5, 1, n), rng.uniform(2, 15, n)]
+    T_ref_cur = pose(0.2, 0.5, 3.0)
+    uv, d = _stereo_measurements(P_ref, T_ref_cur, rng, 0.3)
+    uv[:n_out] = rng.uniform([0, 0], [W, H], (n_out, 2))
+    d[:n_out] = rng.uniform(1, 40, n_out)
+    est = estimate_pose_stereo(P_ref, uv, d, camera, min_inliers=6)
+    assert est.success
+    assert np.linalg.norm(est.T_ref_cur[:3, 3] - T_ref_cur[:3, 3]) < 0.01
+    assert rotation_deg(np.linalg.inv(T_ref_cur) @ est.T_ref_cur) < 0.1
+    assert est.inliers[n_out:].mean() > 0.95 and est.inliers[:n_out].sum() <= 3
+    assert est.position_std_m < 0.01 and est.rms_px < 1.0
+    # only far points (150-200 m): the rotation is found, the position is not constrained -> flagged by its std
+    P_far = np.c_[rng.uniform(-50, 50, 60), rng.uniform(-15, 5, 60), rng.uniform(150, 200, 60)]
+    uv, d = _stereo_measurements(P_far, T_ref_cur, rng, 0.3)
+    far = estimate_pose_stereo(P_far, uv, d, camera, min_inliers=6)
+    assert far.position_std_m > 1.0, far.position_std_m
+    # too few correspondences: a failure, not an exception
+    assert not estimate_pose_stereo(P_ref[:4], uv[:4], d[:4], camera, min_inliers=6).success
+
+
+# --------------------------------------------------------------------------------------------------------------
+# Teach
+
+
+def test_teach_map_keyframes_edges_and_sources(taught: Taught):
+    m = taught.teach_map
+    assert m.sources == ("grey", "fv", "fr") and m.feature == "orb"
+    # 10.8 m at one keyframe per metre: with 0.6 m frames every 1.2 m (9 + the start), the last frame closes the map
+    assert 9 <= len(m) <= 12
+    for kf in m.keyframes:
+        counts = kf.counts()
+        assert counts["grey"] > 300 and counts["fv"] > 150 and counts["fr"] > 150, counts
+    # the VO edges against the truth (frame-to-frame ORB VO at 320×240: ~1 % noise per step): each edge
+    # (1.2 m, two VO steps) within 4 cm and 0.3 deg, the path length within 1.5 %
+    for e in m.edges:
+        truth = np.linalg.inv(taught.kf_pose[e.parent]) @ taught.kf_pose[e.child]
+        err_m = np.linalg.norm(e.T_parent_child[:3, 3] - truth[:3, 3])
+        err_deg = rotation_deg(np.linalg.inv(truth) @ e.T_parent_child)
+        assert err_m < 0.04 and err_deg < 0.3, (e.parent, err_m, err_deg)
+    assert abs(m.length_m - TEACH_Z[-1]) < 0.015 * TEACH_Z[-1], m.length_m
+    # reloading gives the same map
+    again = MapStore.load(taught.path)
+    assert len(again) == len(m)
+    for a, b in zip(again.keyframes, m.keyframes, strict=True):
+        for s in m.sources:
+            np.testing.assert_array_equal(a.landmarks[s].descriptors, b.landmarks[s].descriptors)
+            np.testing.assert_array_equal(a.landmarks[s].points, b.landmarks[s].points)
+
+
+def test_map_nearest_and_window(taught: Taught):
+    m = taught.teach_map
+    assert m.nearest(-5.0) == 0 and m.nearest(1e6) == len(m) - 1
+    for k in range(len(m)):
+        assert m.nearest(float(m.distance_m[k])) == k
+        assert m.nearest(float(m.distance_m[k]) + 0.1) == k
+    assert list(m.window(0, 2)) == [0, 1, 2]
+    assert list(m.window(5, 2)) == [3, 4, 5, 6, 7]
+    assert list(m.window(len(m) - 1, 1)) == [len(m) - 2, len(m) - 1]
+    with pytest.raises(VtrInputError):
+        m.window(len(m), 1)
+    np.testing.assert_allclose(m.T_a_b(2, 5), np.linalg.inv(m.T_map_kf[2]) @ m.T_map_kf[5], atol=1e-12)
+
+
+# --------------------------------------------------------------------------------------------------------------
+# Repeat
+
+
+def test_lighting_change_cancels_in_color_constant_images_only():
+    """The physics of the test's lighting change (module docstring), on one textured patch under the lit and the
+    dim illuminant of both conditions (unquantized): F_v and F_r change by a uniform offset only (spatial spread
+    below 1 % of their texture contrast), log greyscale by −0.5 to −1.2, up to 4× its texture contrast."""
+    rng = np.random.default_rng(0)
+    albedo = np.exp(np.log(0.35) + 0.30 * rng.normal(size=(32, 32, 1)) + 0.25 * rng.normal(size=(32, 32, 3)))
+    images = {}
+    for name, (_, t_lit, t_dim) in LIGHTING.items():
+        for which, T in (("lit", t_lit), ("dim", t_dim)):
+            images[(name, which)] = albedo * wien_gains(T) * 100.0  # float rgb within (1, 255)
+    ref = images[("teach", "lit")]
+    cfg = ColorConstantConfig()
+    for s in ("fv", "fr"):
+        alpha, beta = source_weights(s, cfg)
+        f_ref = color_constant(ref, alpha, beta, cfg)
+        texture = float(np.std(f_ref.values))
+        for key, rgb in images.items():
+            f = color_constant(rgb, alpha, beta, cfg)
+            both = f.valid & f_ref.valid
+            assert both.mean() > 0.95
+            diff = f.values[both] - f_ref.values[both]
+            assert np.ptp(diff) < 0.01 * texture, (key, s, np.ptp(diff), texture)
+    log_grey = {k: np.log(v @ [0.299, 0.587, 0.114]) for k, v in images.items()}
+    texture = float(np.std(log_grey[("teach", "lit")]))
+    steps = {k: float(np.mean(v - log_grey[("teach", "lit")])) for k, v in log_grey.items()}
+    assert steps[("teach", "dim")] < -0.8 and steps[("changed", "dim")] < -1.1, steps
+    assert -steps[("changed", "dim")] > 3.0 * texture, (steps, texture)
+
+
+def test_repeat_under_teach_lighting_all_modes_localize(taught: Taught, runs):
+    for mode in ("fused", "grey"):
+        results = runs("teach", mode)
+        t_err, r_err, loc = pose_errors(taught, results)
+        assert loc.mean() >= 0.95, (mode, summary(results))
+        assert np.median(t_err) < TOL_MEDIAN_M and t_err.max() < TOL_MAX_M, (mode, np.median(t_err), t_err.max())
+        assert r_err.max() < TOL_ROT_DEG, (mode, r_err.max())
+        assert not any(r.failure or r.searched_map for r in results), mode
+    # the lateral offset of the repeat path is recovered (camera x in the keyframe frame)
+    xs = [r.T_kf_cam[0, 3] for r in runs("teach", "fused") if r.localized]
+    assert abs(np.median(xs) - REPEAT_X) < 0.02
+
+
+def test_fused_localizes_under_illuminant_change_where_grey_fails(taught: Taught, runs):
+    fused, grey, mcmanus = (runs("changed", m) for m in ("fused", "grey", "mcmanus"))
+    t_err, r_err, loc = pose_errors(taught, fused)
+    print("changed lighting:", "fused", summary(fused), "| grey", summary(grey), "| mcmanus", summary(mcmanus))
+    assert loc.mean() >= 0.9, summary(fused)
+    assert np.median(t_err) < TOL_MEDIAN_M and t_err.max() < TOL_MAX_M, (np.median(t_err), t_err.max())
+    assert r_err.max() < TOL_ROT_DEG, r_err.max()
+    # the colour-constant sources carry the localization, greyscale adds almost nothing
+    med = {s: np.median([r.inliers_per_source[s] for r in fused if r.localized]) for s in ("grey", "fv", "fr")}
+    assert med["fv"] >= 20 and med["fr"] >= 20 and med["grey"] < 10, med
+    # greyscale alone (legacy) localizes (almost) nowhere: the robot drives on VO and would stop after 20 m
+    _, _, g_loc = pose_errors(taught, grey)
+    assert g_loc.mean() <= 0.1, summary(grey)
+    assert all(r.failure for r in grey)  # never localized: no pose to drive on
+    # McManus et al. (colour-constant only when grey fails, one source): localizes, no better than fused
+    _, _, m_loc = pose_errors(taught, mcmanus)
+    assert m_loc.mean() >= 0.8 and m_loc.sum() <= loc.sum() + 1, summary(mcmanus)
+
+
+def test_failure_after_distance_on_vo_then_whole_map_search(taught: Taught, repeat_features):
+    """§IV-C with a short failure distance: greyscale under the changed lighting never localizes in its window,
+    distance on VO accumulates, the failure is declared past the limit and the whole map is searched every frame;
+    fused relocalizes from a kidnapped start (frames from the middle of the path) by the whole-map search."""
+    grey = RepeatPipeline(taught.teach_map, _repeat_config("grey", max_distance_on_vo_m=1.2, initial_keyframe=0))
+    results = [grey.step_features(i, f, P_LEFT, P_RIGHT) for i, f in enumerate(repeat_features["changed"][:8])]
+    assert not any(r.localized for r in results)
+    d = [r.distance_on_vo_m for r in results]
+    assert all(b >= a for a, b in itertools.pairwise(d))
+    assert d[-1] == pytest.approx(REPEAT_Z[7] - REPEAT_Z[0], abs=0.1)  # VO distance = distance driven
+    assert all(r.failure for r in results)  # never localized (the start window fails), then past the limit
+    assert [r.searched_map for r in results] == [False] * 3 + [True] * 5  # > 1.2 m on VO from frame 3 on
+    # kidnapped fused repeat: starts at frame 12 (z = 4.95 m), the whole map is searched on the first frame
+    fused = RepeatPipeline(taught.teach_map, _repeat_config("fused"))
+    first = fused.step_features(0, repeat_features["changed"][12], P_LEFT, P_RIGHT)
+    assert first.searched_map and first.relocalized and first.localized and first.failure
+    truth_z = REPEAT_Z[12]
+    kf_z = taught.kf_pose[first.keyframe_index][2, 3]
+    assert abs(kf_z + first.T_kf_cam[2, 3] - truth_z) < 0.1
+    assert abs(kf_z - truth_z) <= 0.6  # the nearest keyframe along the path
+
+
+def test_repeat_step_on_images_and_mcmanus_lazy_sources(taught: Taught, scene: Scene):
+    """The node-facing call (images in) in every mode; mcmanus computes F_v/F_r only when grey fails."""
+    rng = np.random.default_rng(30)
+    frames = [scene.stereo("teach", pose(REPEAT_X, z, REPEAT_YAW_DEG), rng) for z in (1.0, 1.3)]
+    for mode in ("fused", "grey", "mcmanus"):
+        rp = RepeatPipeline(taught.teach_map, _repeat_config(mode))
+        for i, (left, right) in enumerate(frames):
+            res = rp.step(i * STAMP_STEP_NS, left, right, P_LEFT, P_RIGHT)
+            assert res.localized, (mode, res)
+            assert set(res.inliers_per_source) == ({"grey"} if mode == "grey" else {"grey", "fv", "fr"})
+            assert "front_end" in res.timing_s and res.covariance is not None
+            if mode == "mcmanus":
+                assert res.inliers_per_source["fv"] == res.inliers_per_source["fr"] == 0
+        rp.close()
+    # black frames: no features, no crash, no localization
+    rp = RepeatPipeline(taught.teach_map, _repeat_config("fused"))
+    black = np.zeros((H, W, 3), np.uint8)
+    res = rp.step(0, black, black, P_LEFT, P_RIGHT)
+    assert not res.localized and res.failure and res.T_kf_cam is None
+    with pytest.raises(VtrInputError):
+        rp.step(1, black, black[:, :-1], P_LEFT, P_RIGHT)
+
+
+# --------------------------------------------------------------------------------------------------------------
+# Map store: corrupt maps and interrupted teaches
+
+
+def _copy_map(taught: Taught, dst: Path) -> Path:
+    MapStore.save(taught.teach_map, dst)
+    return dst
+
+
+def test_corrupt_or_missing_map_is_refused(taught: Taught, tmp_path: Path):
+    with pytest.raises(MapNotFoundError):
+        MapStore.load(tmp_path / "nothing")
+    # truncated keyframe file
+    p = _copy_map(taught, tmp_path / "truncated")
+    kf = p / "keyframes" / "kf_000003.npz"
+    kf.write_bytes(kf.read_bytes()[: kf.stat().st_size // 2])
+    with pytest.raises(MapCorruptError, match="checksum"):
+        MapStore.load(p)
+    # a truncated file whose checksum was "fixed" is still refused (unreadable npz)
+    m = json.loads((p / "manifest.json").read_text())
+    m["keyframes"][3]["sha256"] = hashlib.sha256(kf.read_bytes()).hexdigest()
+    (p / "manifest.json").write_text(json.dumps(m))
+    with pytest.raises(MapCorruptError, match="npz"):
+        MapStore.load(p)
+    # wrong version, wrong format
+    p = _copy_map(taught, tmp_path / "version")
+    m = json.loads((p / "manifest.json").read_text())
+    (p / "manifest.json").write_text(json.dumps(m | {"version": 99}))
+    with pytest.raises(MapVersionError, match="version 99"):
+        MapStore.load(p)
+    (p / "manifest.json").write_text(json.dumps(m | {"format": "something-else"}))
+    with pytest.raises(MapVersionError):
+        MapStore.load(p)
+    # missing manifest (e.g. a teach that never finished)
+    p = _copy_map(taught, tmp_path / "no_manifest")
+    (p / "manifest.json").unlink()
+    with pytest.raises(MapNotFoundError, match="manifest"):
+        MapStore.load(p)
+    # inconsistent counts, missing keyframe file, broken JSON
+    p = _copy_map(taught, tmp_path / "counts")
+    m = json.loads((p / "manifest.json").read_text())
+    m["keyframes"][1]["counts"]["fv"] += 1
+    (p / "manifest.json").write_text(json.dumps(m))
+    with pytest.raises(MapCorruptError, match="counts"):
+        MapStore.load(p)
+    m["keyframes"][1]["counts"]["fv"] -= 1
+    m["num_keyframes"] += 1
+    (p / "manifest.json").write_text(json.dumps(m))
+    with pytest.raises(MapCorruptError, match="num_keyframes"):
+        MapStore.load(p)
+    p = _copy_map(taught, tmp_path / "missing_kf")
+    (p / "keyframes" / "kf_000002.npz").unlink()
+    with pytest.raises(MapCorruptError, match="missing"):
+        MapStore.load(p)
+    (p / "manifest.json").write_text("{ not json")
+    with pytest.raises(MapCorruptError, match="unreadable"):
+        MapStore.load(p)
+    # an npz with the wrong array shape (checksum updated): refused by the shape check
+    p = _copy_map(taught, tmp_path / "shape")
+    kf = p / "keyframes" / "kf_000000.npz"
+    with np.load(kf, allow_pickle=False) as z:
+        arrays = {k: z[k] for k in z.files}
+    arrays["fv_points"] = arrays["fv_points"][:, :2]
+    np.savez(kf.with_suffix(""), **arrays)  # np.savez appends .npz
+    m = json.loads((p / "manifest.json").read_text())
+    m["keyframes"][0]["sha256"] = hashlib.sha256(kf.read_bytes()).hexdigest()
+    (p / "manifest.json").write_text(json.dumps(m))
+    with pytest.raises(MapCorruptError, match="points"):
+        MapStore.load(p)
+    assert issubclass(MapCorruptError, MapError) and issubclass(MapError, VtrError)
+    assert zipfile.is_zipfile(_copy_map(taught, tmp_path / "ok") / "keyframes" / "kf_000000.npz")
+
+
+def test_interrupted_teach_leaves_previous_map(taught: Taught, tmp_path: Path):
+    path = _copy_map(taught, tmp_path / "map")
+    before = MapStore.load(path)
+    with pytest.raises(MapExistsError):
+        TeachPipeline(path)
+    teach = TeachPipeline(path, TeachConfig(keyframe_distance_m=0.5), overwrite=True)
+    for i, f in enumerate(taught.features[:12]):  # 3.3 m: several keyframes written to the staging directory
+        teach.step_features(i * STAMP_STEP_NS, f, P_LEFT, P_RIGHT, (W, H))
+    assert teach.num_keyframes >= 5
+    staging = teach._writer.staging_path
+    assert staging.is_dir() and len(list((staging / "keyframes").glob("*.npz"))) == teach.num_keyframes
+    # the "crash": the teach never finishes; the map at the path is the previous one, complete and valid
+    after = MapStore.load(path)
+    assert len(after) == len(before) and [k.stamp_ns for k in after.keyframes] == [k.stamp_ns for k in before.keyframes]
+    # the keyframes written before the crash can be recovered into a new map
+    recovered = MapStore.load(MapStore.recover(staging, tmp_path / "recovered"))
+    assert len(recovered) == teach.num_keyframes and recovered.metadata["recovered_from"] == str(staging)
+    # an aborted teach removes its staging directory and leaves the previous map
+    teach.abort()
+    assert not staging.exists() and len(MapStore.load(path)) == len(before)
+    # a first teach interrupted before finish(): no map at all
+    fresh = TeachPipeline(tmp_path / "fresh")
+    for i, f in enumerate(taught.features[:5]):
+        fresh.step_features(i * STAMP_STEP_NS, f, P_LEFT, P_RIGHT, (W, H))
+    with pytest.raises(MapNotFoundError):
+        MapStore.load(tmp_path / "fresh")
+    # finishing replaces the map in one step
+    m2 = fresh.finish()
+    assert len(MapStore.load(tmp_path / "fresh")) == len(m2) >= 2
+    with pytest.raises(VtrError):
+        fresh.step_features(99, taught.features[0], P_LEFT, P_RIGHT, (W, H))
+
+
+def test_teach_refuses_a_camera_change(taught: Taught, tmp_path: Path):
+    teach = TeachPipeline(tmp_path / "cam")
+    teach.step_features(0, taught.features[0], P_LEFT, P_RIGHT, (W, H))
+    P2 = P_RIGHT.copy()
+    P2[0, 3] *= 1.1
+    with pytest.raises(VtrInputError, match="camera"):
+        teach.step_features(1, taught.features[1], P_LEFT, P2, (W, H))
+    teach.abort()
+    with pytest.raises(VtrError, match="no frames"):
+        TeachPipeline(tmp_path / "empty").finish()
