@@ -314,6 +314,8 @@ def build_parser() -> argparse.ArgumentParser:
                      "indoor daylight RGB-D sequences DS1.T1-T6, DS2.T1-T6 (see `sim daylight --help`)")
     _add_passthrough(sim_sub, "racr", "lightfast.sim.racr_scenes:main_sim_racr",
                      "20 textured relocalization scenes with reference observations (see `sim racr --help`)")
+    _add_passthrough(sim_sub, "vtr", "lightfast.sim.vtr_recordings:main_sim_vtr",
+                     "spectral outdoor stereo route: teach and day-long repeats (see `sim vtr --help`)")
     crf = sub.add_parser("crf", help="camera response function")
     crf_sub = crf.add_subparsers(dest="crf_command", required=True, metavar="CRF_COMMAND")
     _add_passthrough(crf_sub, "calibrate", "lightfast.daylight.crf:main_crf_calibrate",

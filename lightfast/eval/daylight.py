@@ -357,6 +357,8 @@ def evaluate_daylight(sim_dir: Path, out_dir: Path, *, methods: Sequence[str] = 
     if jobs <= 1:
         for job in track(jobs_list, desc="daylight evaluation", enabled=progress, unit="run"):
             runs.append(_run_job(job))
+            _write_outputs(out_dir, runs, list(methods), [p.name for p in seq_dirs], sim_dir,
+                           time.perf_counter() - t0)  # partial results survive an interruption
             log.info("%s %s: RMSE %.4f m, loss %.2f %%", runs[-1].sequence, runs[-1].method, runs[-1].rmse_m,
                      100 * runs[-1].loss_ratio)
             if on_run is not None:
@@ -374,11 +376,16 @@ def evaluate_daylight(sim_dir: Path, out_dir: Path, *, methods: Sequence[str] = 
                 runs.append(run)
                 if on_run is not None:
                     on_run(run)
-    methods = list(methods)
+    _write_outputs(out_dir, runs, list(methods), [p.name for p in seq_dirs], sim_dir, time.perf_counter() - t0)
+    return runs
+
+
+def _write_outputs(out_dir: Path, runs: Sequence[SequenceRun], methods: list[str], sequences: list[str],
+                   sim_dir: Path, seconds: float) -> None:
     summary = {
         "methods": methods,
-        "sequences": [p.name for p in seq_dirs],
-        "seconds": time.perf_counter() - t0,
+        "sequences": sequences,
+        "seconds": seconds,
         "runs": [{"sequence": r.sequence, "method": r.method, "frames": len(r.frames), "rmse_m": r.rmse_m,
                   "loss_ratio": r.loss_ratio,
                   "brightness_correlation": brightness_correlation(r, sim_dir / r.sequence),
@@ -389,7 +396,6 @@ def evaluate_daylight(sim_dir: Path, out_dir: Path, *, methods: Sequence[str] = 
     _write_csv(out_dir / "daylight_frames.csv", runs)
     write_text_atomic(out_dir / "daylight_summary.json", json.dumps(summary, indent=1) + "\n")
     _plots(out_dir, runs, sim_dir)
-    return runs
 
 
 def _run_job(job: tuple[str, str, str, int | None, str, dict | None]) -> SequenceRun:
