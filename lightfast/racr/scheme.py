@@ -1,0 +1,594 @@
+"""The rACR scheme (paper §3.6): VSE input, an alignment thread that never stops refining, and the adjustment loop;
+plus the serial scheme the paper compares it with (Table 5). ROS-free.
+
+:class:`RacrScheme` owns the state shared by the paper's three threads and one thread of its own:
+
+* **VSE input** (:meth:`RacrScheme.add_vse_observation`, :meth:`RacrScheme.add_vse_pose`): the latest current
+  cloud P with its intensities and keyframes, and the latest camera pose ``T_A = T_cur_cam``, all with the real
+  scale s applied (§3.3). The input is a latest-wins slot: the alignment always works on the newest cloud; one
+  superseded before its alignment finished is dropped (``status.dropped_observations``).
+* **Alignment thread** (§3.4, started by :meth:`RacrScheme.start`): takes the newest observation and runs the fast
+  alignment (Eq. 12–15) warm-started from its last estimate (a cold start from ``T_ref_cur_init`` / ``sigma_init``
+  the first time), repeating it on the same cloud until it converges (or settles: ends where it ended before,
+  within ``settle_factor`` × its tolerances); then the fine alignment (Eq. 16–18) from that result; then waits for
+  the next observation. Each result becomes the latest ``(T_p, σ_p)``.
+* **Adjustment** (§3.5, :meth:`RacrScheme.next_hand_motion`, called by the platform driver whenever the platform is
+  idle): Eq. 3 from the latest ``T_A``, ``T_p``, ``σ_p`` and ``X``; ``g ≤ η`` means converged. A motion is handed
+  out once per platform stop: after issuing one, the scheme waits for a platform pose reported with
+  ``moving=False`` (:meth:`RacrScheme.add_platform_pose`) and then for a VSE pose stamped after it, so every motion
+  is computed from a camera pose taken at rest.
+
+Modes (``SchemeConfig.mode``):
+
+* ``"parallel"`` (the paper's rACR): the alignment runs all the time, also while the platform moves; a motion is
+  available as soon as the platform stopped and the VSE saw the new pose.
+* ``"serial"`` (the paper's serial rACR, Table 5: "alternately conducting point cloud alignment and motion
+  execution in one thread"): while the platform moves, nothing is aligned; after it stopped, the newest
+  observation is aligned to convergence (fast, then fine), and only then is the next motion available.
+
+Time: every stamp and timeout uses the injected ``clock`` (seconds, ``time.monotonic`` by default), so a simulator
+can run the scheme in simulated time. The alignment work is also available as explicit steps
+(:meth:`RacrScheme.next_alignment_job`, :meth:`AlignmentJob.run`, :meth:`RacrScheme.commit`) for a discrete-event
+simulation that charges each job a simulated duration and commits its result when that time has passed; the
+thread uses the same steps. Use either the thread or the steps, not both.
+
+Errors: bad input raises at the call (:class:`~lightfast.racr.errors.AlignmentError` for clouds, keyframes and
+intensities, :class:`~lightfast.racr.errors.AdjustmentError` for poses). An alignment that fails on an observation
+(:class:`~lightfast.racr.errors.RacrError`) is logged and shown in :attr:`RacrScheme.status`; the thread keeps the
+previous estimate and waits for the next observation. Anything else stops the thread and is re-raised as
+:class:`SchemeError` by the next call of :meth:`~RacrScheme.next_hand_motion`, an ``add_*`` method or
+:meth:`~RacrScheme.stop`. No motion is issued before a converged fast alignment exists, and no motion is issued
+from a pose older than the platform's last stop.
+"""
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, replace
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from lightfast.config import Config, param
+from lightfast.geometry import is_rotation, project_to_so3
+from lightfast.racr.adjustment import AdjustmentConfig, AdjustmentStep, adjustment_step
+from lightfast.racr.errors import AdjustmentError, AlignmentError, RacrError
+from lightfast.racr.fast_alignment import FastAlignmentConfig, FastAlignmentResult, ReferenceCloud, fast_align
+from lightfast.racr.fine_alignment import FineAlignmentConfig, FineAlignmentResult, Keyframe, fine_align
+
+__all__ = [
+    "SCHEME_MODES",
+    "SCHEME_STAGES",
+    "AlignmentJob",
+    "RacrScheme",
+    "SchemeConfig",
+    "SchemeError",
+    "SchemeStatus",
+]
+
+logger = logging.getLogger(__name__)
+
+Array = NDArray[np.float64]
+
+SCHEME_MODES = ("parallel", "serial")
+#: ``status.stage``: no observation yet; aligning (no motion possible yet, or serial after a stop); a motion can be
+#: computed; a motion is being executed; converged (g ≤ η); the platform did not report a stop within
+#: ``platform_timeout_s``; the thread died (see ``status.error``).
+SCHEME_STAGES = ("waiting_for_vse", "aligning", "ready", "moving", "converged", "platform_timeout", "failed")
+_MIN_POINTS = 30
+
+
+class SchemeError(RacrError):
+    """The alignment thread stopped on an unexpected error (the original is the ``__cause__``), or the scheme was
+    used out of order (started twice, stepped while its thread runs)."""
+
+
+@dataclass(frozen=True)
+class SchemeConfig(Config):
+    """Options of the rACR scheme (paper §3.6)."""
+
+    mode: str = param("parallel", description="parallel (the paper's rACR) or serial (Table 5's comparison).",
+                      choices=SCHEME_MODES)
+    fine_alignment: bool = param(True, description="Run the fine alignment after the fast one (False: rACR-F).")
+    platform_timeout_s: float = param(
+        60.0, description="No stop reported this long after a motion was issued: stage platform_timeout, s.", min=0.0
+    )
+    settle_factor: float = param(
+        10.0, description="A fast alignment that ends within this many times its tolerances of its previous result "
+        "on the same cloud counts as converged.", min=1.0,
+    )
+    idle_wait_s: float = param(0.05, description="The thread's longest sleep while it has nothing to align, s.",
+                               min=0.001, max=10.0)
+
+
+@dataclass(frozen=True)
+class SchemeStatus:
+    """A snapshot of :class:`RacrScheme` (for ``/racr/status`` and logs). Transforms are copies; ``T_ref_cur`` and
+    ``sigma`` are the latest estimate (None before the first fast alignment) and ``estimate_kind`` says which
+    alignment produced it ("fast" or "fine")."""
+
+    stage: str
+    mode: str
+    time_s: float
+    T_ref_cur: Array | None
+    sigma: float | None
+    estimate_kind: str | None
+    estimate_stamp: float | None
+    g: float | None
+    converged: bool
+    adjustments: int
+    observations: int
+    dropped_observations: int
+    fast_alignments: int
+    fine_alignments: int
+    alignment_failures: int
+    last_alignment_error: str | None
+    error: str | None
+
+
+@dataclass
+class _Observation:
+    seq: int
+    stamp: float
+    points: Array
+    intensities: Array | None
+    T_cur_cam: Array
+    keyframes: tuple[Keyframe, ...]
+    fast_converged: bool = False
+    done: bool = False
+
+
+@dataclass
+class _Estimate:
+    T_ref_cur: Array
+    sigma: float
+    kind: str  # "fast" or "fine"
+    seq: int  # the observation it was computed on
+    stamp: float  # when it was published
+    usable: bool  # a converged fast alignment or a fine one has been reached (motions may be issued)
+    complete: bool  # the alignment of observation ``seq`` has finished (fine done or failed, or fine disabled)
+
+
+class AlignmentJob:
+    """One unit of the alignment thread's work on one observation: a fast alignment (warm or cold) or a fine
+    alignment. :meth:`run` computes without touching the scheme (safe outside its lock); :meth:`RacrScheme.commit`
+    publishes the result."""
+
+    def __init__(
+        self,
+        kind: str,
+        observation: _Observation,
+        reference: ReferenceCloud,
+        T_init: Array,
+        sigma_init: float,
+        fast_config: FastAlignmentConfig,
+        fine_config: FineAlignmentConfig,
+    ) -> None:
+        self.kind = kind
+        self._obs = observation
+        self._reference = reference
+        self._T_init = T_init
+        self._sigma_init = sigma_init
+        self._fast_config = fast_config
+        self._fine_config = fine_config
+        self.result: FastAlignmentResult | FineAlignmentResult | None = None
+        self.error: RacrError | None = None
+        self.seconds = 0.0
+
+    @property
+    def observation_stamp(self) -> float:
+        return self._obs.stamp
+
+    def run(self) -> AlignmentJob:
+        """Run the alignment. A :class:`RacrError` (bad or non-overlapping data) is kept in :attr:`error`; anything
+        else propagates."""
+        start = time.perf_counter()
+        try:
+            if self.kind == "fine":
+                self.result = fine_align(
+                    self._obs.points, self._reference, self._obs.keyframes, T_ref_cur_init=self._T_init,
+                    sigma_init=self._sigma_init, intensities=self._obs.intensities, config=self._fine_config,
+                )
+            else:
+                self.result = fast_align(
+                    self._obs.points, self._reference, T_ref_cur_init=self._T_init, sigma_init=self._sigma_init,
+                    config=self._fast_config,
+                )
+        except RacrError as exc:
+            self.error = exc
+        self.seconds = time.perf_counter() - start
+        return self
+
+
+def _rigid(T: ArrayLike, name: str) -> Array:
+    try:
+        a = np.array(T, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise AdjustmentError(f"{name} must be a 4x4 transform: {exc}") from None
+    if a.shape != (4, 4) or not np.all(np.isfinite(a)):
+        raise AdjustmentError(f"{name} must be a finite 4x4 transform, got shape {a.shape}")
+    if not np.allclose(a[3], [0.0, 0.0, 0.0, 1.0], atol=1e-9) or not is_rotation(a[:3, :3], atol=1e-4):
+        raise AdjustmentError(f"{name} must be rigid ([R t; 0 0 0 1] with R a rotation)")
+    a[:3, :3] = project_to_so3(a[:3, :3])
+    return a
+
+
+def _inverse(T: Array) -> Array:
+    out = np.eye(4)
+    out[:3, :3] = T[:3, :3].T
+    out[:3, 3] = -T[:3, :3].T @ T[:3, 3]
+    return out
+
+
+class RacrScheme:
+    """The rACR scheme of §3.6 around a reference observation; see the module documentation.
+
+    ``reference``: the reference cloud P_ref (a :class:`ReferenceCloud`, or points ``(m, 3)`` in metres, prepared
+    with ``fast_config``'s normal options). ``T_ref_camref``: the reference camera pose T_A^ref (camera-to-reference,
+    metres). ``T_cam_hand``: X from the initialization (§3.2). ``T_ref_cur_init`` / ``sigma_init``: the first fast
+    alignment's start; by default σ_p = 1 (the real scale is applied) and T_p such that the current camera of the
+    first observation sits at the reference pose, ``T_p = T_A^ref ⟨R_A, t_A⟩⁻¹`` (rACR starts near the reference).
+    ``clock``: the time source of every stamp and timeout, seconds.
+    """
+
+    def __init__(
+        self,
+        reference: ReferenceCloud | ArrayLike,
+        T_ref_camref: ArrayLike,
+        T_cam_hand: ArrayLike,
+        *,
+        config: SchemeConfig | None = None,
+        fast_config: FastAlignmentConfig | None = None,
+        fine_config: FineAlignmentConfig | None = None,
+        adjustment_config: AdjustmentConfig | None = None,
+        T_ref_cur_init: ArrayLike | None = None,
+        sigma_init: float = 1.0,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
+        self.config = config if config is not None else SchemeConfig()
+        self.fast_config = fast_config if fast_config is not None else FastAlignmentConfig()
+        self.fine_config = fine_config if fine_config is not None else FineAlignmentConfig()
+        self.adjustment_config = adjustment_config if adjustment_config is not None else AdjustmentConfig()
+        for value, cls in ((self.config, SchemeConfig), (self.fast_config, FastAlignmentConfig),
+                           (self.fine_config, FineAlignmentConfig), (self.adjustment_config, AdjustmentConfig)):
+            if not isinstance(value, cls):
+                raise SchemeError(f"expected a {cls.__name__}, got {type(value).__name__}")
+        self._warm_config = replace(self.fast_config, kernel_initial_m=self.fast_config.kernel_final_m)
+        self._reference = (
+            reference if isinstance(reference, ReferenceCloud) else ReferenceCloud.from_config(reference,
+                                                                                                self.fast_config)
+        )
+        self._T_ref_camref = _rigid(T_ref_camref, "T_ref_camref")
+        self._X = _rigid(T_cam_hand, "T_cam_hand")
+        self._T_init = None if T_ref_cur_init is None else _rigid(T_ref_cur_init, "T_ref_cur_init")
+        if not (np.isfinite(sigma_init) and sigma_init > 0.0):
+            raise AlignmentError(f"sigma_init must be positive and finite, got {sigma_init!r}")
+        self._sigma_init = float(sigma_init)
+        self._clock = clock
+
+        self._lock = threading.Lock()
+        self._wake = threading.Condition(self._lock)
+        self._obs: _Observation | None = None  # the VSE input: the newest observation wins
+        self._seq = 0
+        self._dropped = 0
+        self._pose: tuple[Array, float] | None = None  # latest (T_cur_cam, stamp)
+        self._estimate: _Estimate | None = None
+        self._pending_since: float | None = None  # stamp of the last issued motion until the platform stops
+        self._last_stop = -np.inf
+        self._platform_pose: tuple[Array, float] | None = None
+        self._g: float | None = None
+        self._converged = False
+        self._adjustments = 0
+        self._counts = {"fast": 0, "fine": 0, "failures": 0}
+        self._fast_converged = False
+        self._last_alignment_error: str | None = None
+        self._timeout_logged = False
+        self._thread: threading.Thread | None = None
+        self._stop = threading.Event()
+        self._fatal: BaseException | None = None
+        self._fatal_raised = False
+
+    # ------------------------------------------------------------------ thread
+    def start(self) -> RacrScheme:
+        """Start the alignment thread (not a daemon: :meth:`stop` it, or use the scheme as a context manager).
+        A stopped scheme can be started again."""
+        with self._lock:
+            if self._thread is not None:
+                raise SchemeError("the alignment thread was already started")
+            self._stop.clear()
+            self._thread = threading.Thread(target=self._run, name="racr-alignment", daemon=False)
+            self._thread.start()
+        return self
+
+    def stop(self, timeout: float | None = 30.0) -> None:
+        """Stop and join the alignment thread (the running alignment finishes first), then re-raise, as
+        :class:`SchemeError`, an error that stopped it and was not raised yet."""
+        thread = self._thread
+        self._stop.set()
+        with self._wake:
+            self._wake.notify_all()
+        if thread is not None:
+            thread.join(timeout)
+            if thread.is_alive():
+                raise SchemeError(f"the alignment thread did not stop within {timeout} s")
+            self._thread = None
+        self._raise_fatal()
+
+    @property
+    def running(self) -> bool:
+        """Whether the alignment thread is alive."""
+        return self._thread is not None and self._thread.is_alive()
+
+    def __enter__(self) -> RacrScheme:
+        return self.start()
+
+    def __exit__(self, exc_type: object, exc: object, tb: object) -> None:
+        if exc is None:
+            self.stop()
+        else:  # do not mask the exception in flight
+            try:
+                self.stop()
+            except SchemeError:
+                logger.exception("rACR alignment thread error while handling another exception")
+
+    def _run(self) -> None:
+        try:
+            while not self._stop.is_set():
+                job = self._next_job()
+                if job is None:
+                    with self._wake:
+                        if not self._stop.is_set():
+                            self._wake.wait(self.config.idle_wait_s)
+                    continue
+                self.commit(job.run())
+        except BaseException as exc:  # surfaced on the caller side by _raise_fatal
+            logger.exception("rACR alignment thread stopped")
+            with self._lock:
+                self._fatal = exc
+
+    def _raise_fatal(self) -> None:
+        with self._lock:
+            exc, already = self._fatal, self._fatal_raised
+            if exc is not None:
+                self._fatal_raised = True
+        if exc is not None and not already:
+            raise SchemeError(f"the rACR alignment thread stopped: {type(exc).__name__}: {exc}") from exc
+
+    # ------------------------------------------------------------------ inputs
+    def add_vse_observation(
+        self,
+        points_cur: ArrayLike,
+        intensities: ArrayLike | None,
+        T_cur_cam: ArrayLike,
+        keyframes: Sequence[Keyframe | Sequence[object]],
+        *,
+        stamp: float | None = None,
+    ) -> None:
+        """A new VSE output (§3.3): the current cloud ``(n, 3)`` with the real scale applied, each point's intensity
+        ``(n,)`` (or None), the camera pose ``T_cur_cam`` = T_A and the keyframes (``Keyframe`` or ``(image,
+        T_cur_cam, camera)``). Rows with a non-finite coordinate or intensity are dropped; fewer than 30 points
+        left, bad shapes, a non-rigid pose or an invalid keyframe raise (and nothing is queued)."""
+        self._raise_fatal()
+        try:
+            pts = np.array(points_cur, dtype=np.float64)
+        except (TypeError, ValueError) as exc:
+            raise AlignmentError(f"points_cur must be an (n, 3) array: {exc}") from None
+        if pts.ndim != 2 or pts.shape[1] != 3:
+            raise AlignmentError(f"points_cur must have shape (n, 3), got {pts.shape}")
+        ok = np.all(np.isfinite(pts), axis=1)
+        inten = None
+        if intensities is not None:
+            try:
+                inten = np.array(intensities, dtype=np.float64)
+            except (TypeError, ValueError) as exc:
+                raise AlignmentError(f"intensities must be an (n,) array: {exc}") from None
+            if inten.shape != (len(pts),):
+                raise AlignmentError(f"intensities must have shape ({len(pts)},), got {inten.shape}")
+            ok &= np.isfinite(inten)
+            inten = inten[ok]
+        pts = pts[ok]
+        if len(pts) < _MIN_POINTS:
+            raise AlignmentError(
+                f"the VSE cloud has {len(pts)} finite points (of {len(ok)}); at least {_MIN_POINTS} are needed"
+            )
+        if not np.all(ok):
+            logger.debug("dropped %d non-finite VSE points of %d", int(np.count_nonzero(~ok)), len(ok))
+        T = _rigid(T_cur_cam, "T_cur_cam")
+        kfs = tuple(Keyframe.coerce(k) for k in keyframes)
+        with self._wake:
+            t = self._clock() if stamp is None else float(stamp)
+            self._seq += 1
+            if self._obs is not None and not self._obs.done:
+                self._dropped += 1  # superseded before its alignment finished
+            self._obs = _Observation(self._seq, t, pts, inten, T, kfs)
+            self._set_pose(T, t)
+            self._wake.notify_all()
+
+    def add_vse_pose(self, T_cur_cam: ArrayLike, *, stamp: float | None = None) -> None:
+        """A new VSE camera pose T_A (current-cloud frame, real scale applied) without a new cloud."""
+        self._raise_fatal()
+        T = _rigid(T_cur_cam, "T_cur_cam")
+        with self._wake:
+            self._set_pose(T, self._clock() if stamp is None else float(stamp))
+            self._wake.notify_all()
+
+    def _set_pose(self, T: Array, stamp: float) -> None:
+        if self._pose is None or stamp >= self._pose[1]:
+            self._pose = (T, stamp)
+
+    def add_platform_pose(self, T_base_hand: ArrayLike, *, moving: bool = False, stamp: float | None = None) -> None:
+        """The platform's reported hand pose; ``moving=False`` after a motion was issued marks its end (the
+        platform stopped), from which the next motion's camera pose must be newer."""
+        self._raise_fatal()
+        T = _rigid(T_base_hand, "T_base_hand")
+        with self._wake:
+            t = self._clock() if stamp is None else float(stamp)
+            self._platform_pose = (T, t)
+            if not moving and self._pending_since is not None and t >= self._pending_since:
+                self._pending_since = None
+                self._last_stop = t
+                self._timeout_logged = False
+            self._wake.notify_all()
+
+    # ------------------------------------------------------------------ adjustment (§3.5)
+    def next_hand_motion(self) -> AdjustmentStep | None:
+        """The next hand motion M̂_B (Eq. 3) from the latest T_A, T_p, σ_p, or None when none can be issued yet:
+        no converged fast alignment; a motion still executing (no stop reported); no VSE pose newer than the last
+        stop; in serial mode, the newest observation not aligned to completion yet. A step with ``converged=True``
+        (g ≤ η) must not be executed; otherwise the scheme now waits for the platform to stop."""
+        self._raise_fatal()
+        with self._wake:
+            now = self._clock()
+            if self._pending_since is not None:
+                if now - self._pending_since > self.config.platform_timeout_s and not self._timeout_logged:
+                    logger.warning(
+                        "the platform has not reported a stop %.1f s after the last motion was issued",
+                        now - self._pending_since,
+                    )
+                    self._timeout_logged = True
+                return None
+            est = self._estimate
+            if est is None or not est.usable or self._pose is None or self._pose[1] <= self._last_stop:
+                return None
+            if self.config.mode == "serial" and not self._aligned_to_completion():
+                return None
+            step = adjustment_step(self._pose[0], est.T_ref_cur, est.sigma, self._T_ref_camref, self._X,
+                                   config=self.adjustment_config)
+            self._g = step.g
+            self._converged = step.converged
+            if not step.converged:
+                self._pending_since = now
+                self._adjustments += 1
+                logger.debug("adjustment %d: g=%.3g from a %s estimate", self._adjustments, step.g, est.kind)
+            self._wake.notify_all()
+            return step
+
+    # ------------------------------------------------------------------ alignment (§3.4)
+    def next_alignment_job(self) -> AlignmentJob | None:
+        """The alignment thread's next job at this moment (None: nothing to do now). For discrete-event simulators
+        that run the scheme without its thread; :meth:`AlignmentJob.run` then :meth:`commit`."""
+        if self.running:
+            raise SchemeError("next_alignment_job() is for schemes without a running thread")
+        self._raise_fatal()
+        return self._next_job()
+
+    def _next_job(self) -> AlignmentJob | None:
+        with self._lock:
+            obs = self._obs
+            if obs is None or obs.done:
+                return None
+            if self.config.mode == "serial" and self._pending_since is not None:
+                return None  # the serial scheme stands still while the platform moves
+            est = self._estimate
+            if est is None:
+                T0 = self._T_init if self._T_init is not None else self._start_guess(obs.T_cur_cam)
+                return AlignmentJob("fast", obs, self._reference, T0, self._sigma_init, self.fast_config,
+                                    self.fine_config)
+            # after a converged fast alignment, refine (on the newest cloud: it differs little from the one the
+            # fast alignment saw, and a VSE that streams clouds faster than a fine alignment runs must not starve it)
+            kind = "fine" if self.config.fine_alignment and est.kind == "fast" and self._fast_converged else "fast"
+            return AlignmentJob(kind, obs, self._reference, est.T_ref_cur, est.sigma, self._warm_config,
+                                self.fine_config)
+
+    def _aligned_to_completion(self) -> bool:
+        """Serial mode: the newest observation has been aligned as far as it goes (caller holds the lock)."""
+        est = self._estimate
+        return self._obs is not None and self._obs.done and est is not None and est.complete
+
+    def _start_guess(self, T_cur_cam: Array) -> Array:
+        """T_p putting the current camera at the reference pose: ``T_A^ref ⟨R_A, σ t_A⟩⁻¹``."""
+        scaled = T_cur_cam.copy()
+        scaled[:3, 3] *= self._sigma_init
+        return self._T_ref_camref @ _inverse(scaled)
+
+    def commit(self, job: AlignmentJob) -> None:
+        """Publish a finished job: the new estimate, or the failure in the status."""
+        with self._wake:
+            obs = job._obs
+            now = self._clock()
+            est = self._estimate
+            if job.error is not None:
+                self._counts["failures"] += 1
+                self._last_alignment_error = f"{job.kind} alignment: {job.error}"
+                logger.warning("rACR %s alignment failed on observation %d: %s", job.kind, obs.seq, job.error)
+                obs.done = True  # do not retry the same data; wait for the next observation
+                if est is not None and job.kind == "fine":
+                    self._fast_converged = False
+                    est.seq, est.complete = obs.seq, True  # the fast result stands
+                self._wake.notify_all()
+                return
+            result = job.result
+            assert result is not None
+            self._counts[job.kind] += 1
+            if isinstance(result, FastAlignmentResult):
+                converged = result.converged or self._settled(est, obs.seq, result)
+                self._fast_converged = converged
+                complete = converged and not self.config.fine_alignment
+                obs.done = complete
+                usable = converged or (est is not None and est.usable)
+                self._estimate = _Estimate(result.T_ref_cur.copy(), result.sigma, "fast", obs.seq, now, usable,
+                                           complete)
+                if not converged:
+                    logger.debug("fast alignment not converged after %d iterations; continuing", result.iterations)
+                elif not result.converged:
+                    logger.debug("fast alignment settled: it repeats its last result on this cloud")
+            else:
+                self._fast_converged = False
+                self._estimate = _Estimate(result.T_ref_cur.copy(), result.sigma, "fine", obs.seq, now, True, True)
+                obs.done = True
+            self._wake.notify_all()
+
+    def _settled(self, est: _Estimate | None, seq: int, result: FastAlignmentResult) -> bool:
+        """A fast alignment that ran out of iterations on the same cloud twice and ended where it ended before
+        (within ``settle_factor`` times the tolerances τ_T, τ_σ) has converged for all purposes: the robust ICP
+        can cycle between nearly equal states without ever meeting τ_T = 1e-4 (seen on real-density clouds)."""
+        if est is None or est.kind != "fast" or est.seq != seq:
+            return False
+        dR = est.T_ref_cur[:3, :3].T @ result.T_ref_cur[:3, :3]
+        dt = result.T_ref_cur[:3, 3] - est.T_ref_cur[:3, 3]
+        change = float(np.sqrt(np.sum((dR - np.eye(3)) ** 2) + np.sum(dt**2)))
+        k = self.config.settle_factor
+        return change <= k * self.fast_config.pose_tolerance and (
+            abs(result.sigma - est.sigma) <= k * self.fast_config.scale_tolerance
+        )
+
+    # ------------------------------------------------------------------ status
+    @property
+    def status(self) -> SchemeStatus:
+        """A snapshot of the scheme's state (does not raise; a dead thread shows as stage ``failed``)."""
+        with self._lock:
+            now = self._clock()
+            est = self._estimate
+            if self._fatal is not None:
+                stage = "failed"
+            elif self._converged:
+                stage = "converged"
+            elif self._pending_since is not None:
+                stage = "platform_timeout" if now - self._pending_since > self.config.platform_timeout_s else "moving"
+            elif self._pose is None:
+                stage = "waiting_for_vse"
+            elif est is None or not est.usable or (self.config.mode == "serial" and not self._aligned_to_completion()):
+                stage = "aligning"
+            else:
+                stage = "ready"
+            return SchemeStatus(
+                stage=stage,
+                mode=self.config.mode,
+                time_s=now,
+                T_ref_cur=None if est is None else est.T_ref_cur.copy(),
+                sigma=None if est is None else est.sigma,
+                estimate_kind=None if est is None else est.kind,
+                estimate_stamp=None if est is None else est.stamp,
+                g=self._g,
+                converged=self._converged,
+                adjustments=self._adjustments,
+                observations=self._seq,
+                dropped_observations=self._dropped,
+                fast_alignments=self._counts["fast"],
+                fine_alignments=self._counts["fine"],
+                alignment_failures=self._counts["failures"],
+                last_alignment_error=self._last_alignment_error,
+                error=None if self._fatal is None else f"{type(self._fatal).__name__}: {self._fatal}",
+            )
