@@ -100,7 +100,7 @@ def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--frames", type=int, default=300)
     p.add_argument("--sizes", nargs="+", default=["320x240", "640x480"])
-    p.add_argument("--sun-period", type=float, default=5.0, help="seconds between sun updates (default 5)")
+    p.add_argument("--sun-period", type=float, default=20.0, help="seconds between sun updates (default 20)")
     p.add_argument("--mode", default="proposed")
     p.add_argument("--out", type=Path, default=Path.home() / ".cache" / "lightfast" / "bench-pipeline")
     args = p.parse_args()

@@ -12,7 +12,7 @@
 #   RESOLUTION       scene mesh resolution in metres (default 0.04: a quick first run)
 #   PATCH_SIZE       lighting-map patch size in metres (default 0.1, as in the paper)
 #   SUN_UPDATE_PERIOD  seconds between B̂_sun updates (default 60; small values keep sun chunks streaming)
-#   PREROLL          seconds the clock runs before the first frame, for the first sun update (default 8)
+#   PREROLL          seconds the clock runs before the first frame, for the first sun update (default 15)
 #   MODE             tracker mode: proposed | refl-f2m | depth-only | no-color-f2m (default proposed)
 #   RATE             playback rate (default 1 = real time)
 #   ROS_DOMAIN_ID    DDS domain (default: a random id)
@@ -27,12 +27,14 @@ frames=${FRAMES:-300}
 size=${SIZE:-320x240}
 resolution=${RESOLUTION:-0.04}
 patch_size=${PATCH_SIZE:-0.1}
-preroll=${PREROLL:-8}
+preroll=${PREROLL:-15}
 sun_period=${SUN_UPDATE_PERIOD:-60.0}
 [[ $sun_period == *.* ]] || sun_period="$sun_period.0"  # a double parameter
 mode=${MODE:-proposed}
 rate=${RATE:-1}
 export ROS_DOMAIN_ID=${ROS_DOMAIN_ID:-$(( (RANDOM % 200) + 20 ))}
+# one BLAS/OpenMP thread per process: five processes share 2 cores, and idle BLAS workers spin on them
+export OPENBLAS_NUM_THREADS=${OPENBLAS_NUM_THREADS:-1} OMP_NUM_THREADS=${OMP_NUM_THREADS:-1}
 sim="$out/daylight-sim-$size-$frames-$resolution"
 scene=${sequence%%.*}
 seq_dir="$sim/$sequence"
@@ -61,7 +63,7 @@ logs="$out/demo-logs"
 mkdir -p "$logs"
 echo "== starting the nodes (domain $ROS_DOMAIN_ID, logs in $logs)"
 "$bin/sun_update_node" --ros-args -p use_sim_time:=true -p lighting_map:="$map" -p update_period_s:="$sun_period" \
-  >"$logs/sun_update_node.log" 2>&1 &
+  -p patches_per_step:=2000 >"$logs/sun_update_node.log" 2>&1 &
 pids+=($!)
 "$bin/daylight_relight_node" --ros-args -p use_sim_time:=true -p lighting_map:="$map" \
   -p crf_file:="$seq_dir/camera.yaml" -p reference:="$([ "$mode" = refl-f2m ] && echo reflectance || echo relit)" \
@@ -78,6 +80,8 @@ topics=(/tracker/pose /tracker/coarse_pose /tracker/odometry /tracker/status /re
 recorder=$!
 pids+=($recorder)
 
+# the sun update node logs its map once the patch transport is built: only then can it use the clock's preroll
+for _ in $(seq 600); do grep -q "patches; site" "$logs/sun_update_node.log" && break; sleep 0.5; done
 # the clock runs $preroll s before the first frame: time for the first sun update epoch to stream in
 echo "== playing $seq_dir/bag at rate $rate with /clock ($preroll s preroll)"
 "$lf" bag play "$seq_dir/bag" --rate "$rate" --clock --preroll "$preroll" --wait-for-subscribers 120 \

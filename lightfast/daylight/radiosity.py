@@ -225,6 +225,7 @@ class PatchRadiositySolver:
         iterations: int | None = None,
         tolerance: float = 1e-5,
         max_iterations: int = 500,
+        rows_per_step: int | None = None,
     ) -> None:
         self.rho = np.asarray(reflectance, dtype=np.float64)
         e0 = np.asarray(direct, dtype=np.float64)
@@ -238,6 +239,11 @@ class PatchRadiositySolver:
         self.max_iterations = max_iterations
         self.steps = 0
         self.converged = not np.any(self.source)  # no light: nothing to propagate
+        P = self.source.shape[0]
+        size = P if rows_per_step is None else max(1, int(rows_per_step))
+        self._blocks = [slice(r, min(P, r + size)) for r in range(0, P, size)]
+        self._block = 0
+        self._next = np.empty_like(self.source)
 
     @property
     def done(self) -> bool:
@@ -245,8 +251,21 @@ class PatchRadiositySolver:
             return self.steps >= self.iterations or self.converged
         return self.converged
 
+    @property
+    def blocks_per_iteration(self) -> int:
+        return len(self._blocks)
+
     def step(self) -> None:
-        new = self.source + self.rho * indirect_patch_irradiance(self.transport, self.radiosity)
+        """One block of ``rows_per_step`` patch rows of the current Jacobi iteration (the whole iteration by
+        default); the iteration counts, and is checked for convergence, when its last block is done."""
+        sl = self._blocks[self._block]
+        gathered = (self.transport.gather[sl] @ self.radiosity.astype(np.float32)).astype(np.float64)
+        self._next[sl] = self.source[sl] + self.rho[sl] * gathered
+        self._block += 1
+        if self._block < len(self._blocks):
+            return
+        self._block = 0
+        new = self._next.copy()
         change = float(np.max(np.abs(new - self.radiosity)))
         self.radiosity = new
         self.steps += 1

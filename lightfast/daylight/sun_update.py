@@ -53,12 +53,14 @@ class SunUpdate:
         *,
         epoch_ns: int = 0,
         chunk_vertices: int = 50_000,
+        patches_per_step: int | None = None,
     ) -> None:
         if chunk_vertices < 1:
             raise ValueError(f"chunk_vertices must be >= 1, got {chunk_vertices}")
         self.lmap = lmap
         self.direction = np.asarray(direction_to_sun, dtype=np.float64)
         self.epoch_ns = int(epoch_ns)
+        self.patches_per_step = patches_per_step
         self.lights = lmap.sun_lights(self.direction)
         V = lmap.num_vertices
         self._blocks = [slice(s, min(V, s + chunk_vertices)) for s in range(0, V, chunk_vertices)]
@@ -79,10 +81,12 @@ class SunUpdate:
         return self._phase == "done"
 
     @staticmethod
-    def estimate_steps(num_vertices: int, chunk_vertices: int, iterations: int) -> int:
+    def estimate_steps(num_vertices: int, chunk_vertices: int, iterations: int, *, num_patches: int = 1,
+                       patches_per_step: int | None = None) -> int:
         """Steps an update takes: a direct and an output step per vertex block, plus the transport iterations
-        (``iterations``, or a typical 30 when iterating to convergence)."""
-        return 2 * -(-num_vertices // chunk_vertices) + (iterations or 30)
+        (``iterations``, or a typical 30 when iterating to convergence) times the row blocks per iteration."""
+        blocks = 1 if patches_per_step is None else -(-num_patches // max(1, patches_per_step))
+        return 2 * -(-num_vertices // chunk_vertices) + (iterations or 30) * blocks
 
     def step(self) -> SunChunk | None:
         """Do one bounded unit of work; returns a finished chunk during the output phase, else ``None``."""
@@ -99,7 +103,8 @@ class SunUpdate:
             if self._index == len(self._blocks):
                 self._phase = "transport"
                 self._solver = PatchRadiositySolver(lmap.transport, lmap.patches.reflectance, self._patch_direct,
-                                                    iterations=lmap.config.iterations or None)
+                                                    iterations=lmap.config.iterations or None,
+                                                    rows_per_step=self.patches_per_step)
             return None
         if self._phase == "transport":
             assert self._solver is not None
@@ -146,6 +151,9 @@ class SunUpdateConfig(Config):
                                 "(chunk_vertices x sun samples).", min=1, max=100_000_000)
     update_period_s: float = param(60.0, description="Start a new B̂_sun update this often, in seconds of ROS time "
                                    "(the sun moves 0.25° per minute).", min=0.0, max=86_400.0)
+    patches_per_step: int = param(0, description="Patch rows of one Jacobi iteration of Eq. 2 per step (the "
+                                  "paper's patches per frame); 0 = a whole iteration per step.", min=0,
+                                  max=100_000_000)
     step_period_s: float = param(0.02, description="Period of the update steps in seconds: one bounded step per "
                                  "period (the paper does one chunk per frame).", min=0.001, max=60.0)
     direction_rate_hz: float = param(2.0, description="Rate of /sun/direction in Hz.", min=1.0, max=1000.0)
@@ -182,12 +190,14 @@ class SunUpdatePipeline:
     def step(self, now_ns: int) -> SunChunk | None:
         """Advance the running update by one step (starting one if due); returns a finished chunk or ``None``."""
         if self._due(now_ns):
+            pps = self.config.patches_per_step or None
             steps = SunUpdate.estimate_steps(self.lmap.num_vertices, self.config.chunk_vertices,
-                                             self.lmap.config.iterations)
+                                             self.lmap.config.iterations, num_patches=self.lmap.patches.count,
+                                             patches_per_step=pps)
             finish_ns = int(now_ns + steps * self.config.step_period_s * 1e9)
             direction = self.sun(finish_ns).direction_map
             self.current = SunUpdate(self.lmap, direction, epoch_ns=finish_ns,
-                                     chunk_vertices=self.config.chunk_vertices)
+                                     chunk_vertices=self.config.chunk_vertices, patches_per_step=pps)
             self.last_start_ns = now_ns
             self.epochs_started += 1
             log.info("sun update %d for %.3f s ahead, direction %s", self.epochs_started,

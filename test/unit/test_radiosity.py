@@ -83,12 +83,13 @@ def test_energy_is_conserved(room_map) -> None:
         assert np.all(b >= 0) and np.all(b <= lmap.mesh.reflectance * 2 * np.pi + 1e-6)
 
 
-def test_chunked_sun_update_equals_one_shot(room_map) -> None:
+@pytest.mark.parametrize("patches_per_step", [None, 7])
+def test_chunked_sun_update_equals_one_shot(room_map, patches_per_step) -> None:
     lmap = room_map
     d = np.array([-0.2, -0.7, 0.6])
     d /= np.linalg.norm(d)
     one = sun_radiosity(lmap, d)
-    update = SunUpdate(lmap, d, chunk_vertices=997, epoch_ns=123)
+    update = SunUpdate(lmap, d, chunk_vertices=997, epoch_ns=123, patches_per_step=patches_per_step)
     chunks = list(update.run())
     ids = np.concatenate([c.vertex_ids for c in chunks])
     np.testing.assert_array_equal(ids, np.arange(lmap.num_vertices))  # every vertex exactly once
@@ -97,6 +98,8 @@ def test_chunked_sun_update_equals_one_shot(room_map) -> None:
     np.testing.assert_allclose(chunked, one, rtol=1e-5, atol=1e-5 * float(one.max()))
     assert update.steps_done > len(chunks)  # direct and transport steps came first
     assert one.max() > 0
+    if patches_per_step:  # the Jacobi iterations were split into row blocks: many more, smaller steps
+        assert update.steps_done > len(chunks) + lmap.patches.count // patches_per_step
 
 
 def test_sun_below_horizon_gives_zero(room_map) -> None:
