@@ -9,7 +9,7 @@ from setuptools import find_packages, setup
 
 PACKAGE = "lightfast"
 # node packages, one per capability, added when each is built
-NODES: list[str] = ["sun_update_node", "daylight_relight_node", "rgbd_tracker_node"]
+NODES: list[str] = ["sun_update_node", "daylight_relight_node", "rgbd_tracker_node", "vtr_localizer_node"]
 
 setup(
     name=PACKAGE,

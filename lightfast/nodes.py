@@ -15,6 +15,7 @@ NODE_CONFIGS: dict[str, str] = {
     "sun_update_node": "lightfast.daylight.sun_update:SunUpdateConfig",
     "daylight_relight_node": "lightfast.daylight.relight:RelightConfig",
     "rgbd_tracker_node": "lightfast.tracking.pipeline:TrackerConfig",
+    "vtr_localizer_node": "lightfast.vtr.localizer_config:VtrLocalizerConfig",
 }
 
 

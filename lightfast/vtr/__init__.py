@@ -10,7 +10,8 @@
   versioned, atomically written map directory;
 * :mod:`lightfast.vtr.teach` — the teach phase (§IV-B): :class:`TeachPipeline`;
 * :mod:`lightfast.vtr.repeat` — the repeat phase (§IV-B, IV-C): VO, windowed localization with fused sources,
-  failure after 20 m on VO and whole-map search; modes ``fused``, ``grey``, ``mcmanus``: :class:`RepeatPipeline`.
+  failure after 20 m on VO and whole-map search; modes ``fused``, ``grey``, ``mcmanus``: :class:`RepeatPipeline`;
+* :mod:`lightfast.vtr.localizer_config` — the parameters of ``vtr_localizer_node``: :class:`VtrLocalizerConfig`.
 """
 from __future__ import annotations
 
@@ -30,6 +31,7 @@ from lightfast.vtr.color_constant import (
     to_uint8,
 )
 from lightfast.vtr.errors import VtrError, VtrInputError
+from lightfast.vtr.localizer_config import PHASES, VtrLocalizerConfig
 from lightfast.vtr.map_store import (
     MAP_FORMAT,
     MAP_VERSION,
@@ -82,6 +84,7 @@ __all__ = [
     "MAP_FORMAT",
     "MAP_VERSION",
     "MODES",
+    "PHASES",
     "SOURCES",
     "ColorConstantConfig",
     "ColorConstantImage",
@@ -118,6 +121,7 @@ __all__ = [
     "VoResult",
     "VtrError",
     "VtrInputError",
+    "VtrLocalizerConfig",
     "check_projection",
     "check_stereo_pair",
     "color_constant",

@@ -1,0 +1,242 @@
+"""Command-line helpers around ``vtr_localizer_node`` for launch-free scripts (there is no ``ros2`` CLI here; used
+by ``scripts/vtr_demo.sh``)::
+
+    python -m vtr_localizer_node.tools wait-idle [--settle S] [--timeout S] [--pid PID] [--subscribers TOPIC ...]
+    python -m vtr_localizer_node.tools finish-teach [--settle S] [--timeout S] [--pid PID]
+    python -m vtr_localizer_node.tools summary RECORDED [--map MAP --teach-bag BAG --repeat-bag BAG]
+
+``wait-idle`` waits until the node reports on ``/vtr/status``, every listed topic has a subscriber, and (with
+``--settle S``) the node has had nothing queued and received no new stereo pair for S seconds — e.g. after
+``lightfast bag play`` returned, until the node has processed everything; with ``--pid`` it gives up as soon as
+that process (the node) has exited. ``finish-teach`` does the same, then
+calls the ``/vtr/finish_teach`` service and prints its reply (exit 1 if the teach could not be finished).
+``summary`` reads a bag recorded from a repeat (``/vtr/status``, ``/vtr/localization``) and prints how many pairs
+localized, the failures, inliers per source and timings; with the map and the teach and repeat bags (which hold
+``/ground_truth/pose``, stamped like the images) also the localization error against the truth: the true pose of
+the matched keyframe (its stamp is that of a teach pair) to the true camera pose of the repeat pair.
+Exit codes: 0 done, 1 failed (message on stderr), 2 bad usage.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from lightfast.errors import LightfastError
+from lightfast.ros.convert import pose_to_matrix, stamp_to_ns
+from lightfast.ros.diagnostics import diagnostic_level, diagnostic_values
+from lightfast.topics import (
+    GT_POSE_TOPIC,
+    VTR_FINISH_TEACH_SERVICE,
+    VTR_LOCALIZATION_TOPIC,
+    VTR_STATUS_TOPIC,
+)
+
+NODE_NAME = "vtr_localizer_node"
+_PROG = "python -m vtr_localizer_node.tools"
+
+
+class ToolError(LightfastError):
+    """A helper could not do its job (timeout, failed service call, unreadable bag)."""
+
+
+# --------------------------------------------------------------------------------------------------------------
+# Live helpers
+
+
+def _wait_idle(node: Any, executor: Any, *, settle_s: float, timeout_s: float, subscribers: Sequence[str],
+               pid: int | None = None) -> dict:
+    from diagnostic_msgs.msg import DiagnosticArray
+
+    from lightfast.ros.qos import SENSOR_QOS
+
+    latest: dict[str, str] = {}
+
+    def on_status(msg: DiagnosticArray) -> None:
+        for s in msg.status:
+            if s.name == NODE_NAME:
+                latest.clear()
+                latest.update(diagnostic_values(s))
+
+    node.create_subscription(DiagnosticArray, VTR_STATUS_TOPIC, on_status, SENSOR_QOS)
+    deadline = time.monotonic() + timeout_s
+    key: tuple[str, ...] | None = None
+    since = time.monotonic()
+    while time.monotonic() < deadline:
+        executor.spin_once(timeout_sec=0.1)
+        now = time.monotonic()
+        if pid is not None and not Path(f"/proc/{pid}").exists():
+            raise ToolError(f"{NODE_NAME} (process {pid}) has exited")
+        if not latest or any(node.count_subscribers(t) < 1 for t in subscribers):
+            since = now
+            continue
+        new_key = tuple(latest.get(k, "") for k in ("frames_in", "frames_done", "dropped_behind", "bad_inputs",
+                                                     "ignored"))
+        if new_key != key or latest.get("queued", "0") != "0":
+            key, since = new_key, now
+        elif now - since >= settle_s:
+            return dict(latest)
+    state = f"last status {latest}" if latest else f"no status on {VTR_STATUS_TOPIC} (is {NODE_NAME} running?)"
+    raise ToolError(f"{NODE_NAME} did not become idle within {timeout_s:g} s: {state}")
+
+
+def _session(name: str) -> Any:
+    """A node and executor on lightfast's local transport (``ROS_DOMAIN_ID`` from the environment)."""
+    from lightfast.ros.runtime import ros_session
+
+    return ros_session(name)
+
+
+def cmd_wait_idle(args: argparse.Namespace) -> int:
+    with _session("vtr_wait_idle") as (node, executor):
+        values = _wait_idle(node, executor, settle_s=args.settle, timeout_s=args.timeout, subscribers=args.subscribers,
+                            pid=args.pid)
+    print(f"{NODE_NAME} idle: {values.get('frames_in', '?')} stereo pairs in, {values.get('frames_done', '?')} "
+          f"processed, {values.get('dropped_behind', '?')} dropped behind, {values.get('bad_inputs', '?')} bad inputs")
+    return 0
+
+
+def cmd_finish_teach(args: argparse.Namespace) -> int:
+    from std_srvs.srv import Trigger
+
+    with _session("vtr_finish_teach") as (node, executor):
+        _wait_idle(node, executor, settle_s=args.settle, timeout_s=args.timeout, subscribers=(), pid=args.pid)
+        client = node.create_client(Trigger, VTR_FINISH_TEACH_SERVICE)
+        if not client.wait_for_service(timeout_sec=args.timeout):
+            raise ToolError(f"no service {VTR_FINISH_TEACH_SERVICE} within {args.timeout:g} s")
+        future = client.call_async(Trigger.Request())
+        executor.spin_until_future_complete(future, timeout_sec=args.timeout)
+        if not future.done():
+            raise ToolError(f"{VTR_FINISH_TEACH_SERVICE} did not answer within {args.timeout:g} s")
+        response = future.result()
+    if not response.success:
+        raise ToolError(f"the teach was not finished: {response.message}")
+    print(f"teach finished: {response.message}")
+    return 0
+
+
+# --------------------------------------------------------------------------------------------------------------
+# Summary of a recorded repeat
+
+
+def _gt_poses(bag_path: Path) -> dict[int, np.ndarray]:
+    from lightfast.bag.reader import open_bag
+
+    with open_bag(bag_path) as bag:
+        if GT_POSE_TOPIC not in [t.name for t in bag.info.topics]:
+            return {}
+        out = {}
+        for m in bag.messages(topics=[GT_POSE_TOPIC]):
+            msg = bag.deserialize(m)
+            out[stamp_to_ns(msg.header.stamp)] = pose_to_matrix(msg.pose)
+        return out
+
+
+def summarize(recorded: Path, map_path: Path | None = None, teach_bag: Path | None = None,
+              repeat_bag: Path | None = None) -> dict[str, Any]:
+    """The numbers ``summary`` prints (see the module docstring)."""
+    from lightfast.bag.reader import open_bag
+    from lightfast.vtr.map_store import MapStore
+
+    frames: dict[int, dict[str, str]] = {}
+    poses: dict[int, tuple[int, np.ndarray]] = {}
+    with open_bag(recorded) as bag:
+        topics = [t.name for t in bag.info.topics]
+        for m in bag.messages(topics=[t for t in (VTR_STATUS_TOPIC, VTR_LOCALIZATION_TOPIC) if t in topics]):
+            msg = bag.deserialize(m)
+            if m.topic == VTR_STATUS_TOPIC:
+                for s in msg.status:
+                    v = diagnostic_values(s)
+                    if s.name == NODE_NAME and "localized" in v and v.get("stamp_ns"):
+                        frames[int(v["stamp_ns"])] = v | {"level": str(int(diagnostic_level(s)))}
+            else:
+                kf = int(msg.header.frame_id.rsplit("_", 1)[-1])
+                poses[stamp_to_ns(msg.header.stamp)] = (kf, pose_to_matrix(msg.pose.pose))
+    if not frames:
+        raise ToolError(f"{recorded}: no per-pair {VTR_STATUS_TOPIC} of a repeat")
+    vals = [frames[s] for s in sorted(frames)]
+    localized = [v["localized"] == "true" for v in vals]
+    sources = sorted({k.removeprefix("inliers_") for v in vals for k in v if k.startswith("inliers_")})
+    out: dict[str, Any] = {
+        "pairs": len(vals),
+        "localized": int(sum(localized)),
+        "failure_pairs": sum(v["failure"] == "true" for v in vals),
+        "max_distance_on_vo_m": max(float(v["distance_on_vo_m"]) for v in vals),
+        "median_inliers": {s: float(np.median([int(v[f"inliers_{s}"]) for v, ok in zip(vals, localized, strict=True)
+                                                if ok] or [0])) for s in sources},
+        "median_total_ms": float(np.median([float(v["total_ms"]) for v in vals])),
+        "localization_messages": len(poses),
+    }
+    if map_path is not None and teach_bag is not None and repeat_bag is not None:
+        teach_map = MapStore.load(map_path)
+        gt_teach, gt_repeat = _gt_poses(teach_bag), _gt_poses(repeat_bag)
+        errs = []
+        for stamp, v in zip(sorted(frames), vals, strict=True):
+            if v["localized"] != "true" or stamp not in poses or stamp not in gt_repeat:
+                continue
+            kf, T = poses[stamp]
+            kf_stamp = teach_map.keyframes[kf].stamp_ns
+            if kf_stamp not in gt_teach:
+                continue
+            truth = np.linalg.inv(gt_teach[kf_stamp]) @ gt_repeat[stamp]
+            dR = truth[:3, :3].T @ T[:3, :3]
+            errs.append((float(np.linalg.norm(T[:3, 3] - truth[:3, 3])),
+                         float(np.degrees(np.arccos(np.clip((np.trace(dR) - 1) / 2, -1, 1))))))
+        if errs:
+            t, r = np.array(errs).T
+            out |= {"scored": len(errs), "error_median_cm": 100 * float(np.median(t)),
+                    "error_max_cm": 100 * float(t.max()), "rotation_max_deg": float(r.max())}
+    return out
+
+
+def cmd_summary(args: argparse.Namespace) -> int:
+    s = summarize(args.recorded, args.map, args.teach_bag, args.repeat_bag)
+    inl = ", ".join(f"{k} {v:g}" for k, v in s["median_inliers"].items())
+    print(f"repeat: {s['pairs']} stereo pairs, localized {s['localized']} ({100 * s['localized'] / s['pairs']:.1f} %), "
+          f"pairs in the failure state {s['failure_pairs']}, longest stretch on VO {s['max_distance_on_vo_m']:.2f} m")
+    print(f"repeat: median inliers of localized pairs: {inl}; median time per pair {s['median_total_ms']:.0f} ms")
+    if "scored" in s:
+        print(f"repeat: error against ground truth ({s['scored']} localized pairs): median {s['error_median_cm']:.1f} "
+              f"cm, max {s['error_max_cm']:.1f} cm, rotation max {s['rotation_max_deg']:.2f} deg")
+    return 0
+
+
+# --------------------------------------------------------------------------------------------------------------
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog=_PROG, description="Helpers around vtr_localizer_node for scripts.")
+    sub = parser.add_subparsers(dest="command", required=True)
+    for name, func, text in (("wait-idle", cmd_wait_idle, "wait until the node has processed everything"),
+                             ("finish-teach", cmd_finish_teach, "wait until idle, then finish the teach")):
+        p = sub.add_parser(name, help=text)
+        p.add_argument("--settle", type=float, default=2.0, help="seconds without news that count as idle (2)")
+        p.add_argument("--timeout", type=float, default=300.0, help="give up after this many seconds (300)")
+        p.add_argument("--pid", type=int, help="give up as soon as this process (the node) has exited")
+        if name == "wait-idle":
+            p.add_argument("--subscribers", nargs="*", default=[], metavar="TOPIC",
+                           help="also wait until each of these topics has a subscriber")
+        p.set_defaults(func=func)
+    p = sub.add_parser("summary", help="summarize a bag recorded from a repeat")
+    p.add_argument("recorded", type=Path)
+    p.add_argument("--map", type=Path, help="the teach map (for the error against ground truth)")
+    p.add_argument("--teach-bag", type=Path, help="the taught bag with /ground_truth/pose")
+    p.add_argument("--repeat-bag", type=Path, help="the repeated bag with /ground_truth/pose")
+    p.set_defaults(func=cmd_summary)
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args))
+    except (LightfastError, OSError) as exc:
+        print(f"{_PROG} {args.command}: error: {exc}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())
