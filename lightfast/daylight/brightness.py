@@ -275,7 +275,7 @@ def _crf_residuals(crf: CameraResponse, A: F64, y: F64, c: int, s: F64) -> F64:
 
 
 def _fit_channel_crf(crf: CameraResponse, A: F64, y: F64, c: int, x0: F64, solver: str, *,
-                     max_iterations: int = 50, tolerance: float = 1e-10) -> F64:
+                     max_iterations: int = 30, tolerance: float = 1e-7) -> F64:
     """Minimize Eq. 4 for one channel over the columns of ``A`` (already multiplied by Δt) by Levenberg–Marquardt.
 
     A hand-written LM (Marquardt's diagonal damping; the system has only K ≤ 3 unknowns, so one step costs one
@@ -298,26 +298,33 @@ def _fit_channel_crf(crf: CameraResponse, A: F64, y: F64, c: int, x0: F64, solve
     for _ in range(max_iterations):
         g = J.T @ r
         H = J.T @ J
-        diag = np.maximum(np.diag(H), 1e-12 * max(float(np.max(np.diag(H))), 1e-300))
+        # bounded: components held at s = 0 by a gradient pointing below it stay fixed (active set)
+        free = ~((s <= 0.0) & (g > 0.0)) if bounded else np.ones(len(s), dtype=bool)
+        if not free.any():
+            break
+        Hf, gf = H[np.ix_(free, free)], g[free]
+        diag = np.maximum(np.diag(Hf), 1e-12 * max(float(np.max(np.diag(H))), 1e-300))
         improved = False
-        while lam < 1e12:
+        while lam < 1e8:
             try:
-                step = np.linalg.solve(H + lam * np.diag(diag), -g)
+                step_f = np.linalg.solve(Hf + lam * np.diag(diag), -gf)
             except np.linalg.LinAlgError:
                 lam *= 10.0
                 continue
-            trial = np.maximum(s + step, 0.0) if bounded else s + step
+            trial = s.copy()
+            trial[free] += step_f
+            if bounded:
+                trial = np.maximum(trial, 0.0)
             r_t, J_t, cost_t = evaluate(trial)
             if cost_t < cost:
                 moved = float(np.linalg.norm(trial - s))
-                s, r, J = trial, r_t, J_t
                 rel = (cost - cost_t) / max(cost, 1e-300)
-                cost = cost_t
+                s, r, J, cost = trial, r_t, J_t, cost_t
                 lam = max(lam / 10.0, 1e-12)
                 improved = True
                 break
             lam *= 10.0
-        if not improved or rel < tolerance or moved <= tolerance * (1.0 + float(np.linalg.norm(s))):
+        if not improved or rel < tolerance or moved <= 1e-5 * (1.0 + float(np.linalg.norm(s))):
             break
     return np.maximum(s, 0.0)
 
