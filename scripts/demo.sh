@@ -15,6 +15,7 @@
 #   PREROLL          seconds the clock runs before the first frame, for the first sun update (default 15)
 #   MODE             tracker mode: proposed | refl-f2m | depth-only | no-color-f2m (default proposed)
 #   RATE             playback rate (default 1 = real time)
+#   TRACKER_PARAMS   extra rgbd_tracker_node parameters, e.g. "finest_point_step:=2 f2m_iterations:=[4,3,2]"
 #   ROS_DOMAIN_ID    DDS domain (default: a random id)
 set -euo pipefail
 root=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
@@ -69,7 +70,10 @@ pids+=($!)
   -p crf_file:="$seq_dir/camera.yaml" -p reference:="$([ "$mode" = refl-f2m ] && echo reflectance || echo relit)" \
   >"$logs/daylight_relight_node.log" 2>&1 &
 pids+=($!)
+tracker_params=()
+for kv in ${TRACKER_PARAMS:-}; do tracker_params+=(-p "$kv"); done
 "$bin/rgbd_tracker_node" --ros-args -p use_sim_time:=true -p mode:="$mode" -p initial_pose:="$initial_pose" \
+  "${tracker_params[@]}" \
   >"$logs/rgbd_tracker_node.log" 2>&1 &
 pids+=($!)
 
