@@ -177,6 +177,16 @@ class DaylightRelighter:
         self._reflectance = np.asarray(lmap.mesh.reflectance, dtype=np.float32)
         self.sun_epoch_ns: int | None = None
         self.estimator = self._make_estimator()
+        self._warm_up()
+
+    def _warm_up(self) -> None:
+        """Run the jitted kernels once with the argument types of :meth:`step` (numba compiles, or loads its cache,
+        here rather than on the first live frame)."""
+        miss = np.full(1, -1, dtype=np.int64)
+        uv = np.zeros((1, 2), dtype=np.float32)
+        x = _shade(miss, uv, self._faces, self._stack, np.eye(self._stack.shape[1], 3, dtype=np.float32))
+        _shade(miss, uv, self._faces, self._reflectance, np.eye(3, dtype=np.float32))
+        _apply_response(x, self.crf.inverse)
 
     def _make_estimator(self) -> BrightnessEstimator:
         cfg = self.config
