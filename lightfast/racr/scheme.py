@@ -52,9 +52,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from lightfast.config import Config, param
-from lightfast.geometry import is_rotation, project_to_so3
-from lightfast.racr.adjustment import AdjustmentConfig, AdjustmentStep, adjustment_step
-from lightfast.racr.errors import AdjustmentError, AlignmentError, RacrError
+from lightfast.racr.adjustment import AdjustmentConfig, AdjustmentStep, _inverse, _rigid, adjustment_step
+from lightfast.racr.errors import AlignmentError, RacrError
 from lightfast.racr.fast_alignment import FastAlignmentConfig, FastAlignmentResult, ReferenceCloud, fast_align
 from lightfast.racr.fine_alignment import FineAlignmentConfig, FineAlignmentResult, Keyframe, fine_align
 
@@ -200,26 +199,6 @@ class AlignmentJob:
             self.error = exc
         self.seconds = time.perf_counter() - start
         return self
-
-
-def _rigid(T: ArrayLike, name: str) -> Array:
-    try:
-        a = np.array(T, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise AdjustmentError(f"{name} must be a 4x4 transform: {exc}") from None
-    if a.shape != (4, 4) or not np.all(np.isfinite(a)):
-        raise AdjustmentError(f"{name} must be a finite 4x4 transform, got shape {a.shape}")
-    if not np.allclose(a[3], [0.0, 0.0, 0.0, 1.0], atol=1e-9) or not is_rotation(a[:3, :3], atol=1e-4):
-        raise AdjustmentError(f"{name} must be rigid ([R t; 0 0 0 1] with R a rotation)")
-    a[:3, :3] = project_to_so3(a[:3, :3])
-    return a
-
-
-def _inverse(T: Array) -> Array:
-    out = np.eye(4)
-    out[:3, :3] = T[:3, :3].T
-    out[:3, 3] = -T[:3, :3].T @ T[:3, 3]
-    return out
 
 
 class RacrScheme:
