@@ -375,6 +375,28 @@ class _Terms:
     cost: float
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _add_huber_term(out: NDArray[np.float64], J: NDArray[np.float64], r: float, delta: float,
+                    weight: float) -> tuple[float, bool]:
+    """Add ``weight · ρ_δ`` (Huber, as an IRLS weight) of one residual with Jacobian ``J`` (6,) to ``out``: the
+    upper triangle of JᵀWJ in ``out[:21]``, JᵀWr in ``out[21:]``; returns (cost, inside the Huber threshold)."""
+    ar = abs(r)
+    if ar <= delta:
+        w = weight
+        cost = weight * 0.5 * r * r
+    else:
+        w = weight * delta / ar
+        cost = weight * delta * (ar - 0.5 * delta)
+    k = 0
+    for m in range(6):
+        wj = w * J[m]
+        for n in range(m, 6):
+            out[k] += wj * J[n]
+            k += 1
+        out[21 + m] += wj * r
+    return cost, ar <= delta
+
+
 @numba.njit(cache=True, nogil=True, fastmath=False)
 def _accumulate(
     points: NDArray[np.float32],
@@ -444,21 +466,9 @@ def _accumulate(
             J[3] = qy * gd - qz * gc
             J[4] = qz * ga - qx * gd
             J[5] = qx * gc - qy * ga
-            ar = abs(r)
-            if ar <= delta_c:
-                w = 1.0
-                cost += 0.5 * r * r
-            else:
-                w = delta_c / ar
-                cost += delta_c * (ar - 0.5 * delta_c)
-                inlier = False
-            k = 0
-            for m in range(6):
-                wj = w * J[m]
-                for n in range(m, 6):
-                    out[k] += wj * J[n]
-                    k += 1
-                out[21 + m] += wj * r
+            c, ok = _add_huber_term(out, J, r, delta_c, 1.0)
+            cost += c
+            inlier &= ok
         if use_depth:
             nx, ny, nz = geometry[iv, iu, 4], geometry[iv, iu, 5], geometry[iv, iu, 6]
             r = nx * (qx - geometry[iv, iu, 1]) + ny * (qy - geometry[iv, iu, 2]) + nz * (qz - geometry[iv, iu, 3])
@@ -466,21 +476,9 @@ def _accumulate(
             J[3] = qy * nz - qz * ny
             J[4] = qz * nx - qx * nz
             J[5] = qx * ny - qy * nx
-            ar = abs(r)
-            if ar <= delta_g:
-                w = w_g
-                cost += w_g * 0.5 * r * r
-            else:
-                w = w_g * delta_g / ar
-                cost += w_g * delta_g * (ar - 0.5 * delta_g)
-                inlier = False
-            k = 0
-            for m in range(6):
-                wj = w * J[m]
-                for n in range(m, 6):
-                    out[k] += wj * J[n]
-                    k += 1
-                out[21 + m] += wj * r
+            c, ok = _add_huber_term(out, J, r, delta_g, w_g)
+            cost += c
+            inlier &= ok
         if inlier:
             inliers += 1
     return out, count, inliers, cost
