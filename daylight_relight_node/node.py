@@ -49,7 +49,7 @@ from lightfast.ros.convert import (
     pose_stamped_to_matrix,
     stamp_to_ns,
 )
-from lightfast.ros.diagnostics import Level, ProblemLog, diagnostic_array, diagnostic_status
+from lightfast.ros.diagnostics import Level, ProblemLog, diagnostic_array, diagnostic_status, log_at
 from lightfast.ros.params import ConfigParameters
 from lightfast.ros.qos import SENSOR_QOS
 from lightfast.ros.runtime import run_node
@@ -139,13 +139,7 @@ class DaylightRelightNode(Node):
         lmap.caster.intersect(np.zeros(3), np.array([[0.0, 0.0, 1.0]]))
 
     def _log(self, level: Level, text: str) -> None:
-        logger = self.get_logger()  # rclpy refuses one call site with several severities: one line each
-        if level == Level.OK:
-            logger.info(text)
-        elif level == Level.WARN:
-            logger.warning(text)
-        else:
-            logger.error(text)
+        log_at(self.get_logger(), level, text)
 
     def _now_ns(self) -> int:
         return self.get_clock().now().nanoseconds

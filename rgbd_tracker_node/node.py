@@ -44,7 +44,7 @@ from lightfast.ros.convert import (
     pose_stamped_to_matrix,
     stamp_to_ns,
 )
-from lightfast.ros.diagnostics import Level, ProblemLog, diagnostic_array, diagnostic_status
+from lightfast.ros.diagnostics import Level, ProblemLog, diagnostic_array, diagnostic_status, log_at
 from lightfast.ros.params import ConfigParameters
 from lightfast.ros.qos import SENSOR_QOS
 from lightfast.ros.runtime import run_node
@@ -159,13 +159,7 @@ class RGBDTrackerNode(Node):
         return min(0.1, max(0.01, cfg.reference_timeout_s / 4))
 
     def _log(self, level: Level, text: str) -> None:
-        logger = self.get_logger()  # rclpy refuses one call site with several severities: one line each
-        if level == Level.OK:
-            logger.info(text)
-        elif level == Level.WARN:
-            logger.warning(text)
-        else:
-            logger.error(text)
+        log_at(self.get_logger(), level, text)
 
     def _problem(self, key: str, text: str, level: Level = Level.WARN, stamp_ns: int | None = None) -> None:
         """Bad input or a failed step: throttled log line and a status message; the node carries on."""

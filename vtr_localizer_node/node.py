@@ -82,7 +82,7 @@ from lightfast.ros.convert import (
     numpy_to_image,
     stamp_to_ns,
 )
-from lightfast.ros.diagnostics import Level, ProblemLog, diagnostic_array, diagnostic_status
+from lightfast.ros.diagnostics import Level, ProblemLog, diagnostic_array, diagnostic_status, log_at
 from lightfast.ros.params import ConfigParameters
 from lightfast.ros.qos import SENSOR_QOS
 from lightfast.ros.runtime import run_node
@@ -237,13 +237,7 @@ class VtrLocalizerNode(Node):
             raise ConfigError(f"map_path {path} exists (an empty directory): set overwrite_map to teach into it")
 
     def _log(self, level: Level, text: str) -> None:
-        logger = self.get_logger()  # rclpy refuses one call site with several severities: one line each
-        if level == Level.OK:
-            logger.info(text)
-        elif level == Level.WARN:
-            logger.warning(text)
-        else:
-            logger.error(text)
+        log_at(self.get_logger(), level, text)
 
     def _problem(self, key: str, text: str, level: Level = Level.WARN, stamp_ns: int | None = None, *,
                  count: bool = True) -> None:

@@ -23,6 +23,7 @@ __all__ = [
     "diagnostic_status",
     "diagnostic_values",
     "format_value",
+    "log_at",
 ]
 
 
@@ -85,6 +86,17 @@ def diagnostic_level(status: Any) -> Level:
 def diagnostic_values(status: Any) -> dict[str, str]:
     """The ``key: value`` strings of a ``DiagnosticStatus``."""
     return {str(kv.key): str(kv.value) for kv in status.values}
+
+
+def log_at(logger: Any, level: Level, text: str) -> None:
+    """Log ``text`` on an rclpy logger at the severity of a status ``level``. One call site per severity: rclpy
+    refuses a call site that is used with several severities."""
+    if level == Level.OK:
+        logger.info(text)
+    elif level == Level.WARN:
+        logger.warning(text)
+    else:
+        logger.error(text)
 
 
 class ProblemLog:
