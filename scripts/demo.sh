@@ -39,14 +39,16 @@ export OPENBLAS_NUM_THREADS=${OPENBLAS_NUM_THREADS:-1} OMP_NUM_THREADS=${OMP_NUM
 sim="$out/daylight-sim-$size-$frames-$resolution"
 scene=${sequence%%.*}
 seq_dir="$sim/$sequence"
-map="$sim/maps/$scene-$patch_size"
 mkdir -p "$out"
 
 echo "== recording $sequence ($frames frames, $size) in $sim (reused when complete)"
 "$lf" sim daylight "$sim" --sequences "$sequence" --frames "$frames" --size "$size" --resolution "$resolution"
+# the method's map is the simulator's reconstruction of a depth scan (scenes/<scene>.map.ply), never the true mesh
+map_ply="$sim/scenes/$scene.map.ply"
+map="$sim/maps/$scene-$patch_size-$(sha1sum "$map_ply" | cut -c1-12)"
 if [ ! -f "$map/metadata.json" ]; then
   echo "== preparing the lighting map of $scene in $map"
-  "$lf" daylight prepare "$sim/scenes/$scene.ply" "$sim/scenes/$scene.site.yaml" "$map" --patch-size "$patch_size"
+  "$lf" daylight prepare "$map_ply" "$sim/scenes/$scene.site.yaml" "$map" --patch-size "$patch_size"
 fi
 initial_pose=$("$lf" bag pose "$seq_dir/bag")  # the evaluation protocol's known start pose
 

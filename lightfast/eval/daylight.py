@@ -207,7 +207,7 @@ def _lighting_map(scene: str, sim_dir: Path, maps_dir: Path, progress: bool,
     from lightfast.daylight.sun import Site
 
     out = maps_dir / scene
-    mesh_path, site_path = sim_dir / "scenes" / f"{scene}.ply", sim_dir / "scenes" / f"{scene}.site.yaml"
+    mesh_path, site_path = sim_dir / "scenes" / f"{scene}.map.ply", sim_dir / "scenes" / f"{scene}.site.yaml"
     if out.exists():
         lmap = LightingMap.load(out)
         if lmap.mesh.content_hash != load_ply(mesh_path).content_hash:

@@ -35,12 +35,16 @@ trajectory maps to a normalized exposure of 0.18, so sunlit areas saturate.
 
 Output of :func:`generate_daylight_set` in ``OUT``::
 
-    scenes/DS1.ply, DS1.site.yaml, DS1.json   the scene mesh (linear RGB reflectance) and site, shared
+    scenes/DS1.ply, DS1.site.yaml, DS1.json   the true scene mesh (linear RGB reflectance) and site, shared
+    scenes/DS1.map.ply              the method's map: a TSDF reconstruction of a simulated night-time depth scan
+                                    with recovered reflectance (:mod:`lightfast.sim.map_reconstruction`, as the
+                                    paper's maps were made, §IV-A); give this one to ``lightfast daylight prepare``
     DS1.T1/bag/                     rosbag2 MCAP: /camera/color/image_raw (rgb8), /camera/color/camera_info,
                                     /camera/depth/image_raw (16UC1, millimetres, 0 = invalid),
                                     /camera/depth/camera_info, /ground_truth/pose (PoseStamped T_map_camera in
                                     frame ``map``); images in ``camera_color_optical_frame``; stamps = true UTC
-    DS1.T1/mesh.ply, site.yaml      hard links to (or copies of) the shared scene files
+    DS1.T1/mesh.ply, map.ply,       hard links to (or copies of) the shared scene files (true mesh, the
+           site.yaml                method's map, site)
     DS1.T1/camera.yaml              the true camera: CRF (model and 256-sample forward/inverse tables), exposure
                                     time, gain, sensitivity, noise, depth sensor, intrinsics
     DS1.T1/truth.csv                per frame: sun position, cloud transmittance, DNI/DHI/GHI and the RGB scales
@@ -74,6 +78,7 @@ from scipy.interpolate import PchipInterpolator
 from lightfast.camera import PinholeCamera
 from lightfast.daylight.mesh import save_ply
 from lightfast.daylight.sun import Site, sun_position
+from lightfast.geometry import inverse, se3_exp, se3_log
 from lightfast.io import write_text_atomic
 from lightfast.progress import track
 from lightfast.sim.daylight_scene import DaylightScene, make_scene
@@ -84,6 +89,7 @@ from lightfast.sim.gt_renderer import (
     GroundTruthRenderer,
     frame_scales,
 )
+from lightfast.sim.map_reconstruction import ReconstructionSettings, reconstruct_map
 from lightfast.sim.sky_model import (
     CLEAR_SKY_RGB,
     LUMA,
@@ -117,7 +123,10 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 #: Bump when the output of the same parameters changes.
-FORMAT_VERSION = 2  # 2: gaze angular rates limited (the look-at gaze whipped at up to 900°/s near targets)
+FORMAT_VERSION = 3  # 2: gaze angular rates limited (the look-at gaze whipped at up to 900°/s near targets);
+# 3: depth from the depth camera (time offset, registration error, projector shadow, correlated + systematic error)
+#: Bump when the reconstructed map of the same scene changes.
+MAP_FORMAT_VERSION = 1
 #: Limits of the gaze's angular rates (before the hand jitter), like a person panning a hand-held camera.
 MAX_YAW_RATE_DEG_S = 75.0
 MAX_PITCH_RATE_DEG_S = 45.0
@@ -354,6 +363,19 @@ def hand_held_trajectory(scene: DaylightScene, n_frames: int, rate_hz: float, rn
 # files
 
 
+def depth_camera_poses(poses: NDArray[np.float64], rate_hz: float, sensor: DepthSensor) -> NDArray[np.float64]:
+    """``T_map_depth`` per frame: the camera pose ``sensor.time_offset_s`` before each colour image (geodesic
+    interpolation between frames, extrapolated before the first) times the registration error."""
+    w = sensor.time_offset_s * rate_hz
+    if len(poses) < 2 or w == 0.0:
+        return poses @ sensor.registration()
+    prev = np.concatenate([poses[1:2], poses[:-1]])  # frame 0 extrapolates away from frame 1
+    out = np.empty_like(poses)
+    for i in range(len(poses)):
+        out[i] = poses[i] @ se3_exp((-w if i == 0 else w) * se3_log(inverse(poses[i]) @ prev[i]))
+    return out @ sensor.registration()
+
+
 def _camera_yaml(resp: CameraResponse, depth: DepthSensor, camera: PinholeCamera) -> str:
     values = np.arange(256, dtype=np.float64)
     xs = np.linspace(0.0, 1.0, 256)
@@ -409,8 +431,8 @@ def _complete(seq_dir: Path, digest: str) -> bool:
             return False
     except (OSError, ValueError):
         return False
-    return all((seq_dir / name).exists() for name in ("bag/metadata.yaml", "mesh.ply", "site.yaml", "camera.yaml",
-                                                      "truth.csv"))
+    return all((seq_dir / name).exists() for name in ("bag/metadata.yaml", "mesh.ply", "map.ply", "site.yaml",
+                                                      "camera.yaml", "truth.csv"))
 
 
 # ----------------------------------------------------------------------------------------------------------------
@@ -467,6 +489,7 @@ def _generate_sequence(spec: SequenceSpec, scene: DaylightScene, renderer: Groun
                                  sunlit_points=sunlit, surface_points=surface)
     resp = _auto_exposure(renderer, cache, states, poses, CameraResponse())
     depth_sensor = DepthSensor()
+    T_map_depth = depth_camera_poses(poses, rate_hz, depth_sensor)
     types = rosbags_types()
     qos = [make_qos(reliable=True, depth=10)]
     seq_dir.mkdir(parents=True, exist_ok=True)
@@ -485,7 +508,8 @@ def _generate_sequence(spec: SequenceSpec, scene: DaylightScene, renderer: Groun
             out = renderer.render(poses[i], camera, cache, states[i], supersample=supersample,
                                   sun_samples=sun_samples, rng=rng)
             rgb = resp.capture(out.radiance, rng)
-            depth_m = depth_sensor.measure(out.depth_m, out.sun_irradiance_wm2, rng)
+            z_true = depth_sensor.true_depth(renderer.caster, T_map_depth[i], camera)
+            depth_m = depth_sensor.measure(z_true, out.sun_irradiance_wm2, rng)
             depth_mm = np.round(depth_m * 1000.0).astype(np.uint16)
             t_render += time.perf_counter() - t0
             sat.append(float(np.mean(rgb == 255)))
@@ -500,6 +524,7 @@ def _generate_sequence(spec: SequenceSpec, scene: DaylightScene, renderer: Groun
             bag.write_message(GT_POSE_TOPIC, t_ns, matrix_to_pose_stamped(poses[i], stamp_ns=t_ns,
                                                                           frame_id=MAP_FRAME, types=types))
     _link_or_copy(scene_files["mesh"], seq_dir / "mesh.ply")
+    _link_or_copy(scene_files["map"], seq_dir / "map.ply")
     _link_or_copy(scene_files["site"], seq_dir / "site.yaml")
     write_text_atomic(seq_dir / "camera.yaml", _camera_yaml(resp, depth_sensor, camera))
     write_text_atomic(seq_dir / "truth.csv", _truth_csv(rows))
@@ -531,21 +556,40 @@ def _generate_sequence(spec: SequenceSpec, scene: DaylightScene, renderer: Groun
     return summary
 
 
-def _scene_files(out: Path, scene: DaylightScene) -> dict[str, Path]:
-    """Write (or keep) the shared mesh PLY and site YAML of ``scene`` under ``out/scenes``."""
+def reconstruction_settings(resolution_m: float) -> ReconstructionSettings:
+    """The simulated scan for a scene mesh of ``resolution_m``: 2 cm voxels for the full-size scenes; coarse
+    voxels and small depth images for the coarse test scenes."""
+    if resolution_m <= 0.05:
+        return ReconstructionSettings()
+    return ReconstructionSettings(voxel_m=resolution_m, width=80, height=60)
+
+
+def _scene_files(out: Path, scene: DaylightScene, *, progress: bool = False) -> dict[str, Path]:
+    """Write (or keep) the shared mesh PLY, the method's reconstructed map PLY and the site YAML of ``scene``
+    under ``out/scenes``."""
     d = out / "scenes"
     mesh_path, site_path, meta_path = d / f"{scene.name}.ply", d / f"{scene.name}.site.yaml", d / f"{scene.name}.json"
+    map_path = d / f"{scene.name}.map.ply"
+    recon = reconstruction_settings(scene.resolution_m)
     meta = {"mesh_hash": scene.mesh.content_hash, "vertices": scene.mesh.num_vertices,
-            "faces": scene.mesh.num_faces, "resolution_m": scene.resolution_m, "site": scene.site.to_yaml()}
+            "faces": scene.mesh.num_faces, "resolution_m": scene.resolution_m, "site": scene.site.to_yaml(),
+            "map": {"format_version": MAP_FORMAT_VERSION, "reconstruction": asdict(recon),
+                    "depth_sensor": asdict(DepthSensor())}}
     try:
-        same = json.loads(meta_path.read_text()) == meta and mesh_path.is_file() and site_path.is_file()
+        same = (json.loads(meta_path.read_text()) == meta and mesh_path.is_file() and site_path.is_file()
+                and map_path.is_file())
     except (OSError, ValueError):
         same = False
     if not same:
+        if meta_path.exists():
+            meta_path.unlink()  # incomplete or stale: the marker goes first
+        d.mkdir(parents=True, exist_ok=True)
         save_ply(scene.mesh, mesh_path)
         scene.site.to_yaml(site_path)
+        log.info("%s: reconstructing the method's map from a simulated depth scan", scene.name)
+        save_ply(reconstruct_map(scene, recon, progress=progress), map_path)
         write_text_atomic(meta_path, json.dumps(meta, indent=1) + "\n")
-    return {"mesh": mesh_path, "site": site_path}
+    return {"mesh": mesh_path, "site": site_path, "map": map_path}
 
 
 def generate_daylight_set(
@@ -605,7 +649,7 @@ def generate_daylight_set(
             if site is not None:
                 kw["site"] = site
             scene = make_scene(spec.scene, **kw)
-            scenes[spec.scene] = (scene, _scene_files(out, scene))
+            scenes[spec.scene] = (scene, _scene_files(out, scene, progress=progress))
             renderers[spec.scene] = GroundTruthRenderer(scene.mesh, scene.window)
         scene, files = scenes[spec.scene]
         meta = seq_dir / "sequence.json"

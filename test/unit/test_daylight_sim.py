@@ -290,7 +290,7 @@ def test_trajectory_is_hand_held_like() -> None:
 def test_tiny_recording_roundtrip_caching_and_determinism(tmp_path: Path) -> None:
     out = tmp_path / "set"
     [seq] = generate_daylight_set(out, sequences=["DS1.T6"], **TINY)
-    for name in ("mesh.ply", "site.yaml", "camera.yaml", "truth.csv", "sequence.json"):
+    for name in ("mesh.ply", "map.ply", "site.yaml", "camera.yaml", "truth.csv", "sequence.json"):
         assert (seq / name).is_file()
     meta = json.loads((seq / "sequence.json").read_text())
     start_ns = int(dt.datetime(2021, 2, 3, 12, 15, tzinfo=dt.UTC).timestamp()) * 10**9
@@ -335,3 +335,64 @@ def test_cli_entry_point(tmp_path: Path) -> None:
     assert meta["params"]["width"] == 32 and meta["frames"] == 2
     with pytest.raises(SystemExit):
         main_sim_daylight([str(tmp_path / "out"), "--size", "32by24"])
+
+
+def _wall_with_box() -> ReflectanceMesh:
+    """A wall at z = 3 m (facing -z) and a 0.4 m box face at z = 2 m in front of it, seen from the origin."""
+    def quad(x0: float, x1: float, y0: float, y1: float, z: float) -> tuple[np.ndarray, np.ndarray]:
+        v = np.array([[x0, y0, z], [x1, y0, z], [x1, y1, z], [x0, y1, z]], float)
+        return v, np.array([[0, 2, 1], [0, 3, 2]])
+    (vw, fw), (vb, fb) = quad(-5, 5, -5, 5, 3.0), quad(-0.2, 0.2, -0.2, 0.2, 2.0)
+    v = np.concatenate([vw, vb])
+    return ReflectanceMesh(v, np.concatenate([fw, fb + 4]), np.full(v.shape, 0.5))
+
+
+def test_depth_sensor_projector_shadow_beside_an_occluding_edge() -> None:
+    from lightfast.raycast import RayCaster
+
+    mesh = _wall_with_box()
+    caster = RayCaster(mesh.vertices_m, mesh.faces)
+    cam = PinholeCamera(160, 120, 131.25, 131.25, 79.5, 59.5)
+    z = DepthSensor().true_depth(caster, np.eye(4), cam)
+    no_proj = DepthSensor(projector_baseline_m=0.0).true_depth(caster, np.eye(4), cam)
+    assert (no_proj > 0).all()
+    row = z[60]
+    # the box spans u ≈ 66..93; the projector sits at +x, so the wall just left of the box is in its shadow (as
+    # on a Kinect), width ≈ f b (1/z_box − 1/z_wall) = 131.25 · 0.075 · (1/2 − 1/3) ≈ 1.6 px
+    shadow = np.flatnonzero(row == 0)
+    assert 1 <= len(shadow) <= 3 and 62 <= shadow.min() and shadow.max() <= 66
+    assert np.isclose(row[80], 2.0) and np.isclose(row[20], 3.0)
+
+
+def test_depth_sensor_noise_is_spatially_correlated_and_distortion_systematic() -> None:
+    sensor = DepthSensor(disparity_step_px=1e-6, distortion_px=0.0)
+    z = np.full((240, 320), 2.0)
+    errs = [sensor.measure(z, np.zeros_like(z), np.random.default_rng(s)) - z for s in range(4)]
+    e = np.stack(errs)
+    lag1 = np.corrcoef(e[:, :, :-1].ravel(), e[:, :, 1:].ravel())[0, 1]
+    assert lag1 > 0.6  # block-correlation disparity: neighbours share their error
+    white = DepthSensor(disparity_step_px=1e-6, distortion_px=0.0, correlation_px=0.0)
+    w = white.measure(z, np.zeros_like(z), np.random.default_rng(0)) - z
+    assert abs(np.corrcoef(w[:, :-1].ravel(), w[:, 1:].ravel())[0, 1]) < 0.05
+    # random error ≈ z² / (f b) · σ_d, the same rms with or without correlation
+    expect = 4.0 / sensor.focal_baseline_px_m * sensor.disparity_noise_px
+    assert np.isclose(e.std(), expect, rtol=0.1) and np.isclose(w.std(), expect, rtol=0.1)
+    # the systematic part repeats frame after frame and differs between centre and corners
+    biased = DepthSensor(disparity_step_px=1e-6, disparity_noise_px=0.0)
+    b1 = biased.measure(z, np.zeros_like(z), np.random.default_rng(1)) - z
+    b2 = biased.measure(z, np.zeros_like(z), np.random.default_rng(2)) - z
+    assert np.allclose(b1, b2)
+    assert abs(b1[0, 0] - b1[120, 160]) > 0.005
+
+
+def test_depth_camera_poses_lag_the_colour_camera() -> None:
+    from lightfast.sim.daylight_recordings import depth_camera_poses
+
+    poses = np.repeat(np.eye(4)[None], 5, axis=0)
+    poses[:, 0, 3] = 0.3 * np.arange(5) / 30.0  # 0.3 m/s along x at 30 Hz
+    sensor = DepthSensor(registration_rotation_deg=0.0, registration_translation_m=0.0)
+    T = depth_camera_poses(poses, 30.0, sensor)
+    assert np.allclose(T[:, 0, 3], poses[:, 0, 3] - 0.3 * sensor.time_offset_s)
+    reg = DepthSensor().registration()
+    assert np.allclose(reg[:3, :3] @ reg[:3, :3].T, np.eye(3))
+    assert np.isclose(np.linalg.norm(reg[:3, 3]), DepthSensor().registration_translation_m)
