@@ -4,9 +4,10 @@ the coarse pose (paper §III-C, Eq. 3–6, and §III-D, the reference images I_C
 :class:`DaylightRelighter` is the pipeline ``daylight_relight_node`` runs, one :meth:`~DaylightRelighter.step` per
 live frame at its coarse pose ``T≈`` (from frame-to-frame tracking):
 
-1. *rendering*: one Embree ray per pixel of the camera at ``T≈`` (a single batch); the hit triangles and barycentric
-   weights give the depth image and, at the pixel subset Ω (the ``stride_px`` grid), the normalized radiosity
-   images I_B̂x and the reflectance (:class:`~lightfast.daylight.brightness.RadiosityImages`);
+1. *rendering*: one Embree ray per pixel of the live camera's pixel subset Ω (the ``stride_px`` grid) gives the
+   normalized radiosity images I_B̂x and the reflectance there (:class:`~lightfast.daylight.brightness.
+   RadiosityImages`); one ray per pixel of the reference camera (the live camera scaled by ``reference_scale``,
+   one batch) gives the hit triangles and barycentric weights of the reference images and the depth image;
 2. *estimation*: the scales ``s_x`` by E_crf (Eq. 4) or E_lin (Eq. 6), averaged over ``window`` frames
    (:class:`~lightfast.daylight.brightness.BrightnessEstimator`);
 3. *shading*: the reference colour ``f(Δt · Σ_x s_x I_B̂x)`` of every pixel (Eq. 3 through the camera response).
@@ -22,8 +23,8 @@ from __future__ import annotations
 import logging
 import time
 from dataclasses import dataclass, field
-from functools import lru_cache
 
+import cv2
 import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -64,6 +65,9 @@ class RelightConfig(Config):
     method: str = param("crf", description="Brightness error: E_crf (Eq. 4) or E_lin (Eq. 6).", choices=("crf", "lin"))
     solver: str = param("bounded-lm", description="E_crf solver: Levenberg-Marquardt with s >= 0 or unbounded.",
                         choices=("bounded-lm", "lm"))
+    reference_scale: float = param(
+        0.5, description="Reference images at this fraction of the live resolution (0.5: a quarter of the rays; "
+        "frame-to-model tracking projects the live points into it).", choices=(1.0, 0.5))
     stride_px: int = param(15, description="Grid spacing of the pixel subset Omega, pixels.", min=1, max=200)
     window: int = param(30, description="Frames in the moving average of the scales.", min=1, max=10_000)
     min_reflectance: float = param(MIN_REFLECTANCE, description="Omega drops pixels with a smaller model "
@@ -147,15 +151,6 @@ def _apply_response(x: NDArray[np.float32], inverse: NDArray[np.float64]) -> NDA
     return out
 
 
-@lru_cache(maxsize=8)
-def _grid_index(camera: PinholeCamera, stride_px: int) -> NDArray[np.int64]:
-    """Row-major indices of the Ω grid pixels among all pixels of ``camera``."""
-    uv, _ = _grid_rays(camera, stride_px)
-    idx = uv[:, 1] * camera.width + uv[:, 0]
-    idx.setflags(write=False)
-    return idx
-
-
 class DaylightRelighter:
     """Brightness estimation and reference rendering for one camera and lighting map; see the module docstring.
 
@@ -227,24 +222,29 @@ class DaylightRelighter:
         R, t = _pose(T_map_cam)
         cfg = self.config
         t0 = time.perf_counter()
-        _, d_cam = _grid_rays(camera, 1)
+        # Ω: the stride_px grid of the live camera, its own (small) cast
+        uv_g, d_g = _grid_rays(camera, cfg.stride_px)
+        hits_g = self.lmap.caster.intersect(t, d_g @ R.T)
+        comp = _shade(hits_g.triangle_id, hits_g.barycentric_uv, self._faces, self._stack,
+                      np.eye(self._stack.shape[1], dtype=np.float32))
+        rho = _shade(hits_g.triangle_id, hits_g.barycentric_uv, self._faces, self._reflectance,
+                     np.eye(3, dtype=np.float32))
+        valid = hits_g.hit & np.all(rho >= cfg.min_reflectance, axis=1)
+        depth_g = np.where(hits_g.hit, hits_g.distance_m * d_g[:, 2].astype(np.float32), 0.0).astype(np.float32)
+        images = RadiosityImages(uv_g, {n: comp[:, 3 * k: 3 * k + 3] for k, n in enumerate(self.names)}, rho, valid,
+                                 depth_g)
+        # the reference camera: one ray per pixel of the live camera scaled by reference_scale
+        ref_cam = camera if cfg.reference_scale == 1.0 else camera.scaled(cfg.reference_scale)
+        _, d_cam = _grid_rays(ref_cam, 1)
         hits = self.lmap.caster.intersect(t, d_cam @ R.T)
         hit, tri_id, uv = hits.hit, hits.triangle_id, hits.barycentric_uv
         depth = np.where(hit, hits.distance_m * d_cam[:, 2].astype(np.float32), 0.0).astype(np.float32)
-        # Ω: the grid subset of the same cast
-        g = _grid_index(camera, cfg.stride_px)
-        comp = _shade(tri_id[g], uv[g], self._faces, self._stack, np.eye(self._stack.shape[1], dtype=np.float32))
-        rho = _shade(tri_id[g], uv[g], self._faces, self._reflectance, np.eye(3, dtype=np.float32))
-        valid = hit[g] & np.all(rho >= cfg.min_reflectance, axis=1)
-        images = RadiosityImages(_grid_rays(camera, cfg.stride_px)[0],
-                                 {n: comp[:, 3 * k: 3 * k + 3] for k, n in enumerate(self.names)}, rho, valid,
-                                 depth[g])
         t1 = time.perf_counter()
         scales = self.estimator.update(img, images)
         fit = self.estimator.last_fit
         frame_scales = fit.scales.copy() if fit is not None and fit.num_pixels >= cfg.min_pixels else None
         t2 = time.perf_counter()
-        h, wd = camera.height, camera.width
+        h, wd = ref_cam.height, ref_cam.width
         if cfg.reference == "relit":
             # B = Σ_x s_x B̂_x per pixel (the (K·3, 3) matrix holds the scales), then f(Δt · B) through the table
             mix = np.zeros((self._stack.shape[1], 3), dtype=np.float32)
@@ -254,7 +254,8 @@ class DaylightRelighter:
         else:
             refl = _shade(tri_id, uv, self._faces, self._reflectance, np.eye(3, dtype=np.float32))
             m_ref = float(np.mean(refl[hit] @ _GREY)) if hit.any() else 0.0
-            m_live = float(np.mean(img.reshape(-1, 3)[hit] @ _GREY)) if hit.any() else 0.0
+            live = img if ref_cam is camera else cv2.resize(img, (wd, h), interpolation=cv2.INTER_AREA)
+            m_live = float(np.mean(live.reshape(-1, 3)[hit] @ _GREY)) if hit.any() else 0.0
             color8 = np.clip(np.rint(refl * (m_live / m_ref if m_ref > 0 else 0.0)), 0, 255).astype(np.uint8)
         color8 = color8.reshape(h, wd, 3)
         t3 = time.perf_counter()

@@ -224,8 +224,14 @@ class RGBDTracker:
         p = self._pending[stamp]
         t0 = time.perf_counter()
         cfg = self.config
+        half = self.camera.scaled(0.5)
+        ref_shape = np.shape(ref_depth_m)[:2]
+        if ref_shape not in (self.camera.shape, half.shape):
+            raise TrackingError(f"reference {stamp}: depth image {ref_shape} is neither the camera's size "
+                                f"{self.camera.shape} nor half of it {half.shape}")
         try:
-            ref = prepare_frame(ref_rgb, ref_depth_m, self.camera, config=cfg, name=f"reference {stamp}")
+            ref = prepare_frame(ref_rgb, ref_depth_m, self.camera if ref_shape == self.camera.shape else half,
+                                config=cfg, name=f"reference {stamp}")
         except TrackingError as exc:
             if "no valid depth" in str(exc):
                 return self._finish(stamp, p.T_best, "f2f", "reference has no valid depth", None,

@@ -120,10 +120,11 @@ class TrackingConfig(Config):
         0.02, description="Huber threshold of the point-to-plane residual, m.", min=1e-6
     )
     step_tolerance: float = param(
-        1e-6, description="Stop a level when the update norm |xi| falls below this.", min=0.0
+        1e-4, description="Stop a level when the update norm |xi| falls below this (1e-4: 0.1 mm / 0.006 deg).",
+        min=0.0,
     )
     finest_point_step: int = param(
-        1, description="Source points at the finest level: every pixel (1), a checkerboard (2) or every second row "
+        2, description="Source points at the finest level: every pixel (1), a checkerboard (2) or every second row "
         "and column (4); the reference keeps every pixel.", choices=(1, 2, 4)
     )
     min_inlier_ratio: float = param(
@@ -599,7 +600,11 @@ def align_frames(
     use_depth: bool | None = None,
 ) -> AlignResult:
     """:func:`align` on frames prepared once by :func:`prepare_frame` (a live frame serves as the f2f source,
-    then as the f2f target of the next frame, and as the f2m source against the reference)."""
+    then as the f2f target of the next frame, and as the f2m source against the reference).
+
+    The target may be rendered at half the source's resolution (a reference at ``reference_scale`` 0.5): pyramid
+    level ``k`` of the source is aligned to level ``k`` of the target, projecting the source's points with the
+    target's intrinsics."""
     cfg = TrackingConfig() if config is None else config
     color, depth = _resolve_terms(cfg, use_color, use_depth)
     init = _check_init(init_T_target_source)
@@ -609,8 +614,9 @@ def align_frames(
                 f"{role} frame was prepared with pyramid_levels={frame.pyramid_levels}, resolution_scale="
                 f"{frame.resolution_scale}; this alignment uses {cfg.pyramid_levels}, {cfg.resolution_scale}"
             )
-    if source.camera != target.camera:
-        raise TrackingError(f"source and target cameras differ: {source.camera} vs {target.camera}")
+    if target.camera not in (source.camera, source.camera.scaled(0.5)):
+        raise TrackingError(f"the target camera must be the source camera or the source camera at half resolution: "
+                            f"source {source.camera}, target {target.camera}")
     return _align_pyramids(source.levels, target.levels, init, cfg, color, depth)
 
 

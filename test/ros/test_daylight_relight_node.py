@@ -207,7 +207,7 @@ def send_epoch(probe: Probe, radiosity: np.ndarray, epoch_ns: int, parts: slice 
 
 
 def test_reference_for_image_and_pose_in_either_order(relight, scene: Scene) -> None:
-    node, probe = relight(window=1)
+    node, probe = relight(window=1, reference_scale=1.0)  # full resolution: comparable with the live frames
     probe.publish("info", camera_info_from_camera(scene.camera, stamp_ns=stamp(0), frame_id=OPTICAL_FRAME))
     send_epoch(probe, scene.sun, stamp(0))
     probe.wait_status(lambda lvl, msg, v: v.get("sun_epoch_ns") == str(stamp(0)))

@@ -46,7 +46,7 @@ T0 = look_at([2.25, 4.3, 1.6], [0.0, -2.8, -1.4])
 def test_relighter_estimates_scales_and_renders_the_live_image(room, true_crf):
     lmap, sun = room
     rgb, depth = live_frame(lmap, sun, true_crf, T0)
-    rl = DaylightRelighter(lmap, true_crf, config=RelightConfig(window=1))
+    rl = DaylightRelighter(lmap, true_crf, config=RelightConfig(window=1, reference_scale=1.0))
     with pytest.raises(BrightnessError, match="B̂_sun"):
         rl.step(0, rgb, T0, CAMERA)
     rl.set_sun_radiosity(sun, epoch_ns=1)
@@ -55,8 +55,19 @@ def test_relighter_estimates_scales_and_renders_the_live_image(room, true_crf):
     assert np.mean(np.abs(ref.color.astype(float) - rgb)) < 1.0
     np.testing.assert_allclose(ref.depth_m, depth, atol=1e-5)
     assert set(ref.seconds) >= {"render", "estimate"}
+    # the default half-resolution reference: the same estimate, the scene as the half-size camera sees it
+    half = CAMERA.scaled(0.5)
+    rh = DaylightRelighter(lmap, true_crf, config=RelightConfig(window=1))
+    rh.set_sun_radiosity(sun, epoch_ns=1)
+    ref_h = rh.step(0, rgb, T0, CAMERA)
+    np.testing.assert_allclose(ref_h.scales, ref.scales, rtol=1e-6)
+    comps = {"sun": sun, "sky": lmap.sky_radiosity, "ground": lmap.ground_radiosity}
+    truth_h = relit_image(lmap, comps, S_TRUE, T0, half, true_crf)
+    assert ref_h.color.shape == (half.height, half.width, 3)
+    assert np.mean(np.abs(ref_h.color.astype(float) - truth_h.rgb8())) < 1.0
+    np.testing.assert_allclose(ref_h.depth_m, truth_h.depth_m, atol=1e-5)
     # reflectance reference: mean grey brightness matches the live image
-    rr = DaylightRelighter(lmap, true_crf, config=RelightConfig(reference="reflectance"))
+    rr = DaylightRelighter(lmap, true_crf, config=RelightConfig(reference="reflectance", reference_scale=1.0))
     rr.set_sun_radiosity(sun, epoch_ns=1)
     refl = rr.step(0, rgb, T0, CAMERA)
     grey = np.array([0.299, 0.587, 0.114])
