@@ -9,7 +9,8 @@ from setuptools import find_packages, setup
 
 PACKAGE = "lightfast"
 # node packages, one per capability, added when each is built
-NODES: list[str] = ["sun_update_node", "daylight_relight_node", "rgbd_tracker_node", "vtr_localizer_node"]
+NODES: list[str] = ["sun_update_node", "daylight_relight_node", "rgbd_tracker_node", "vtr_localizer_node",
+                     "racr_node", "racr_platform_sim_node", "racr_vse_node"]
 
 setup(
     name=PACKAGE,

@@ -16,6 +16,9 @@ NODE_CONFIGS: dict[str, str] = {
     "daylight_relight_node": "lightfast.daylight.relight:RelightConfig",
     "rgbd_tracker_node": "lightfast.tracking.pipeline:TrackerConfig",
     "vtr_localizer_node": "lightfast.vtr.localizer_config:VtrLocalizerConfig",
+    "racr_node": "lightfast.racr.node_config:RacrNodeConfig",
+    "racr_platform_sim_node": "lightfast.sim.racr_live:RacrPlatformSimConfig",
+    "racr_vse_node": "lightfast.sim.racr_live:RacrVseSimConfig",
 }
 
 

@@ -40,3 +40,28 @@ VTR_FR_TOPIC = "/vtr/color_constant/fr"
 VTR_FINISH_TEACH_SERVICE = "/vtr/finish_teach"  # std_srvs/srv/Trigger
 VTR_ODOM_FRAME = "vtr_odom"  # origin of the VO chain: the left camera of the first frame processed
 VTR_KEYFRAME_FRAME_PREFIX = "vtr_keyframe_"  # + keyframe index: the left camera frame of a taught keyframe
+
+# rACR (paper 2, §3): a visual SLAM engine (VSE) and a robotic platform in, racr_node out (README: rACR topics)
+VSE_POINTS_TOPIC = "/vse/points"  # PointCloud2 x, y, z (VSE units) + intensity, frame VSE_FRAME
+VSE_POSE_TOPIC = "/vse/pose"  # PoseStamped T_vse_cam (VSE units)
+VSE_KEYFRAME_IMAGE_TOPIC = "/vse/keyframe/image"  # Image mono8/mono16/32FC1, frame VSE_KEYFRAME_FRAME_PREFIX + id
+VSE_KEYFRAME_POSE_TOPIC = "/vse/keyframe/pose"  # TransformStamped VSE_FRAME -> VSE_KEYFRAME_FRAME_PREFIX + id
+VSE_CAMERA_INFO_TOPIC = "/vse/camera_info"  # CameraInfo of the keyframe images
+VSE_STATUS_TOPIC = "/vse/status"  # DiagnosticArray of the VSE stand-in (racr_vse_node)
+VSE_FRAME = "vse"
+VSE_KEYFRAME_FRAME_PREFIX = "vse_keyframe_"
+PLATFORM_POSE_TOPIC = "/platform/pose"  # PoseStamped T_base_hand as the platform reports it (m)
+PLATFORM_STOPPED_TOPIC = "/platform/stopped"  # PoseStamped T_base_hand, once per motion, stamped when at rest
+PLATFORM_STATUS_TOPIC = "/platform/status"  # DiagnosticArray
+PLATFORM_BASE_FRAME = "platform_base"
+PLATFORM_HAND_FRAME = "platform_hand"
+PLATFORM_HAND_GOAL_FRAME = "platform_hand_goal"
+RACR_HAND_MOTION_TOPIC = "/racr/hand_motion"  # TransformStamped platform_hand -> platform_hand_goal = M_B
+RACR_STATUS_TOPIC = "/racr/status"  # DiagnosticArray
+RACR_ALIGNED_CLOUD_TOPIC = "/racr/aligned_cloud"  # PointCloud2 in the reference frame (inspection)
+RACR_REFERENCE_CLOUD_TOPIC = "/racr/reference_cloud"  # PointCloud2, the loaded reference (inspection)
+RACR_CAMERA_POSE_TOPIC = "/racr/camera_pose"  # PoseStamped T_ref_cam, the current camera in the reference frame
+# simulator truth: the platform simulator publishes it for the VSE stand-in (which renders from it) and evaluations;
+# racr_node never subscribes to it
+SIM_CAMERA_POSE_TOPIC = "/sim/ground_truth/camera_pose"  # PoseStamped T_world_cam (true camera pose)
+SIM_WORLD_FRAME = "world"

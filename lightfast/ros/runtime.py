@@ -11,6 +11,7 @@ from contextlib import contextmanager
 import rclpy
 from rclpy.context import Context
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.signals import SignalHandlerOptions
@@ -93,6 +94,9 @@ def run_node(make_node: Callable[[], Node], name: str, args: list[str] | None = 
         return 1
     except (KeyboardInterrupt, ExternalShutdownException):  # Ctrl-C, or SIGTERM through rclpy's handler
         pass
+    except _rclpy.RCLError:
+        if rclpy.ok():  # a real error; after a signal the wait set may fail on the shut-down context instead
+            raise
     finally:
         if node is not None:
             node.destroy_node()

@@ -1,0 +1,72 @@
+"""rACR across processes: ``scripts/racr_demo.sh`` on a tiny simulated scene (160×120 px, 1 cm mesh) starts
+racr_platform_sim_node, racr_vse_node and racr_node as three processes; racr_node initializes (hand–eye and scale
+from its own motions), aligns and adjusts until it converges; the script scores the final camera pose by the
+simulator's truth. Ctrl-C (SIGINT to the script's process group) stops every process it started."""
+from __future__ import annotations
+
+import os
+import re
+import signal
+import subprocess
+import time
+from pathlib import Path
+
+import pytest
+
+from test.helpers import bounded_process, child_env
+
+ROOT = Path(__file__).resolve().parents[2]
+DEMO = ["bash", str(ROOT / "scripts/racr_demo.sh")]
+#: η = 3e-3: at 160×120 px the estimate's own noise (~1e-3 in g) keeps the paper's 1e-4 out of reach.
+TINY = {"SIZE": "160x120", "RESOLUTION": "0.01", "TIME_SCALE": "20", "ETA": "3e-3", "TIMEOUT": "90"}
+
+
+def _leftovers(marker: str) -> list[str]:
+    out = subprocess.run(["pgrep", "-af", marker], capture_output=True, text=True).stdout
+    return [line for line in out.splitlines() if "pgrep" not in line]
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(240)
+def test_racr_demo_converges_across_processes(tmp_path: Path, domain_id: int) -> None:
+    out = tmp_path / "out"
+    env = child_env(domain_id, LIGHTFAST_OUT=str(out), **TINY)
+    with bounded_process(DEMO, timeout_s=180, env=env) as proc:
+        stdout, stderr = proc.communicate(timeout=200)
+    log = stdout[-3000:] + stderr[-3000:]
+    assert proc.returncode == 0, log
+    m = re.search(r"racr: converged after (\d+) adjustments \((\d+) motions, 4 for the initialization\) in "
+                  r"([\d.]+) s wall, ([\d.]+) s simulated platform time", stdout)
+    assert m, log
+    adjustments, motions, sim_s = int(m.group(1)), int(m.group(2)), float(m.group(4))
+    assert adjustments >= 1 and motions == adjustments + 4 and sim_s > 4 * 10.0, log  # 4 init motions of 13 s
+    m = re.search(r"racr: final AFD ([\d.]+) px over (\d+) grid points \(success", stdout)
+    assert m and float(m.group(1)) < 3.0 and int(m.group(2)) > 100, log
+    m = re.search(r"racr: final camera pose vs the reference: ([\d.]+) mm, ([\d.]+) deg", stdout)
+    assert m and float(m.group(1)) < 20.0 and float(m.group(2)) < 0.5, log
+    m = re.search(r"racr: real scale s [\d.]+ \(([-+\d.]+) % off the truth\), hand-eye X error ([\d.]+) deg", stdout)
+    assert m and abs(float(m.group(1))) < 5.0 and float(m.group(2)) < 2.0, log
+    racr_log = (out / "racr-logs" / "racr.log").read_text()
+    assert "initialization motion 4" in racr_log and "converged" in racr_log
+    assert not _leftovers(str(tmp_path))
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(150)
+def test_ctrl_c_stops_every_process(tmp_path: Path, domain_id: int) -> None:
+    out = tmp_path / "out"
+    env = child_env(domain_id, LIGHTFAST_OUT=str(out), **{**TINY, "TIMEOUT": "60", "TIME_SCALE": "1"})
+    racr_log = out / "racr-logs" / "racr.log"
+    with bounded_process(DEMO, timeout_s=90, env=env) as proc:
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline and proc.poll() is None:
+            if racr_log.is_file() and "initialization motion 1" in racr_log.read_text():
+                break
+            time.sleep(0.2)
+        assert proc.poll() is None, proc.communicate()
+        assert len(_leftovers(str(tmp_path))) >= 3  # the three nodes run (a 13 s motion at time scale 1)
+        os.killpg(proc.pid, signal.SIGINT)  # what Ctrl-C in a terminal does
+        stdout, stderr = proc.communicate(timeout=60)
+    assert proc.returncode == 130, stdout[-2000:] + stderr[-2000:]
+    assert "interrupted" in stdout
+    assert not _leftovers(str(tmp_path))
