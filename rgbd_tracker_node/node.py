@@ -12,9 +12,12 @@ with its f2f pose. Each finished frame is published on ``/tracker/pose`` (PoseSt
 (DiagnosticArray: source f2m/f2f, reason, mode, f2f/f2m ms, inlier ratios, latency). Tracking starts at the
 ``initial_pose`` parameter; a PoseStamped on ``/tracker/reset`` restarts it at that pose.
 
-Threading as in ``daylight_relight_node``: the subscription callbacks only convert and buffer; the tracking runs in
-a guard-condition callback of its own callback group (references first, then one new frame per call), and a timer
-of the same group wakes it for reference deadlines. Parameter changes are applied there too.
+Threading: the subscription callbacks only convert and buffer. Frame-to-frame tracking runs in a guard-condition
+callback of its own callback group (one new frame per call; a timer of the same group wakes it for reference
+deadlines; parameter changes and resets are applied there too); frame-to-model tracking runs in a second one, so
+that the f2m alignment of one frame (numba kernels without the GIL) overlaps the f2f alignment of the next on the
+multi-threaded executor of ``main``. The tracker's state is touched under one lock; only the alignments run
+outside it.
 """
 from __future__ import annotations
 
@@ -120,7 +123,8 @@ class RGBDTrackerNode(Node):
         self._last_pose: np.ndarray | None = None  # newest T≈, to restart from after a camera/config change
         self._pending: OrderedDict[int, _Pending] = OrderedDict()
 
-        self._lock = threading.Lock()  # guards everything the input callbacks share with the worker
+        self._lock = threading.Lock()  # guards everything the input callbacks share with the workers
+        self._state = threading.RLock()  # guards the tracker and the pending frames (f2f and f2m workers)
         self._live: ExactTimePairs[tuple[np.ndarray, str], np.ndarray] = ExactTimePairs(MAX_UNPAIRED)
         self._refs: ExactTimePairs[np.ndarray, np.ndarray] = ExactTimePairs(MAX_UNPAIRED)
         self._frames: deque[_Frame] = deque()
@@ -134,6 +138,7 @@ class RGBDTrackerNode(Node):
 
         inputs = MutuallyExclusiveCallbackGroup()
         work = MutuallyExclusiveCallbackGroup()
+        refine = MutuallyExclusiveCallbackGroup()
         self.coarse_pub = self.create_publisher(PoseStamped, COARSE_POSE_TOPIC, SENSOR_QOS)
         self.pose_pub = self.create_publisher(PoseStamped, TRACKER_POSE_TOPIC, SENSOR_QOS)
         self.odom_pub = self.create_publisher(Odometry, TRACKER_ODOMETRY_TOPIC, SENSOR_QOS)
@@ -146,6 +151,7 @@ class RGBDTrackerNode(Node):
         sub(Image, REFERENCE_DEPTH_TOPIC, self._on_ref_depth, SENSOR_QOS, callback_group=inputs)
         sub(PoseStamped, TRACKER_RESET_TOPIC, self._on_reset, SENSOR_QOS, callback_group=inputs)
         self.work_trigger = self.create_guard_condition(self._work, callback_group=work)
+        self.refine_trigger = self.create_guard_condition(self._refine_work, callback_group=refine)
         # the deadline timer only wakes the worker: references already received are handled before deadlines
         self.deadline_timer = self.create_timer(self._deadline_period(cfg), self.work_trigger.trigger,
                                                 callback_group=work)
@@ -226,7 +232,7 @@ class RGBDTrackerNode(Node):
     def _enqueue_ref(self, stamp: int, pair: tuple[np.ndarray, np.ndarray] | None) -> None:
         if pair is not None:
             self._ref_queue.append((stamp, *pair))
-            self.work_trigger.trigger()
+            self.refine_trigger.trigger()
 
     def _on_camera_info(self, msg: CameraInfo) -> None:
         try:
@@ -266,26 +272,31 @@ class RGBDTrackerNode(Node):
         with self._lock:
             new_config, self._new_config = self._new_config, None
             reset, self._reset = self._reset, None
-            refs = list(self._ref_queue)
-            self._ref_queue.clear()
             frame = self._frames.popleft() if self._frames else None
             camera = self._camera
             more = bool(self._frames)
-        if new_config is not None:
-            self._apply_config(new_config)
-        if camera is not None and self.tracker is not None and camera != self.tracker.camera:
-            self._restart("camera_info changed")
-        if reset is not None:
-            self._apply_reset(*reset)
-        for stamp, rgb, depth in refs:
-            self._refine(stamp, rgb, depth)
-        # deadlines only now, with every reference received so far handled; not after tracking a frame, during
-        # which a reference may have arrived that the next call takes first
-        self._finish_overdue()
-        if frame is not None:
-            self._track(frame, camera)
+        with self._state:
+            if new_config is not None:
+                self._apply_config(new_config)
+            if camera is not None and self.tracker is not None and camera != self.tracker.camera:
+                self._restart("camera_info changed")
+            if reset is not None:
+                self._apply_reset(*reset)
+            self._finish_overdue()
+            if frame is not None:
+                self._track(frame, camera)
         if more:
             self.work_trigger.trigger()  # one frame per call: the other callbacks get their turn in between
+
+    def _refine_work(self) -> None:
+        with self._lock:
+            refs = list(self._ref_queue)
+            self._ref_queue.clear()
+        try:
+            for stamp, rgb, depth in refs:
+                self._refine(stamp, rgb, depth)
+        except LightfastError as exc:  # a safety net, as in _work
+            self._problem("internal", f"f2m step failed: {exc}", Level.ERROR)
 
     def _apply_config(self, cfg: TrackerConfig) -> None:
         old, self.config = self.config, cfg
@@ -348,20 +359,39 @@ class RGBDTrackerNode(Node):
             self._publish_result(self.tracker.skip_reference(
                 s, f"no reference: more than max_pending={self.config.max_pending} frames waiting"))
 
+    def _late(self, stamp: int) -> None:
+        self.stats["late_references"] += 1
+        self.problems.report("late", f"reference for frame {stamp} came late or for an unknown frame (ignored)",
+                             Level.OK)
+
     def _refine(self, stamp: int, rgb: np.ndarray, depth: np.ndarray) -> None:
-        if self.tracker is None or stamp not in self._pending:
-            self.stats["late_references"] += 1
-            self.problems.report("late", f"reference for frame {stamp} came late or for an unknown frame (ignored)",
-                                 Level.OK)
-            return
-        for s in [s for s in self._pending if s < stamp]:  # references come in order: these lost theirs
-            self._publish_result(self.tracker.skip_reference(s, "no reference (a later frame's reference came)"))
-        try:
-            result = self.tracker.refine(stamp, rgb, depth)
-        except TrackingError as exc:
-            self.problems.report("reference", f"bad reference for frame {stamp}: {exc}")
-            result = self.tracker.skip_reference(stamp, f"bad reference: {exc}")
-        self._publish_result(result)
+        with self._state:
+            tracker = self.tracker
+            if tracker is None or stamp not in self._pending:
+                self._late(stamp)
+                return
+            for s in [s for s in self._pending if s < stamp]:  # references come in order: these lost theirs
+                self._publish_result(tracker.skip_reference(s, "no reference (a later frame's reference came)"))
+            try:
+                job = tracker.start_refine(stamp, rgb, depth)
+            except TrackingError as exc:
+                self._bad_reference(tracker, stamp, exc)
+                return
+        job.run()  # the alignment, outside the lock: f2f of the next frame goes on meanwhile
+        with self._state:
+            if self.tracker is not tracker or stamp not in self._pending:  # restarted, reset or timed out meanwhile
+                self._late(stamp)
+                return
+            try:
+                result = tracker.finish_refine(job)
+            except TrackingError as exc:
+                self._bad_reference(tracker, stamp, exc)
+                return
+            self._publish_result(result)
+
+    def _bad_reference(self, tracker: RGBDTracker, stamp: int, exc: TrackingError) -> None:
+        self.problems.report("reference", f"bad reference for frame {stamp}: {exc}")
+        self._publish_result(tracker.skip_reference(stamp, f"bad reference: {exc}"))
 
     def _finish_overdue(self) -> None:
         if self.tracker is None:
@@ -405,7 +435,7 @@ class RGBDTrackerNode(Node):
 
 
 def main(args: list[str] | None = None) -> int:
-    return run_node(RGBDTrackerNode, NODE_NAME, args)
+    return run_node(RGBDTrackerNode, NODE_NAME, args, num_threads=3)  # inputs, f2f and f2m in parallel
 
 
 if __name__ == "__main__":

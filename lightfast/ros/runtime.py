@@ -10,7 +10,7 @@ from contextlib import contextmanager
 
 import rclpy
 from rclpy.context import Context
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor, SingleThreadedExecutor
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -78,17 +78,25 @@ def message_class(msgtype: str) -> type:
         ) from None
 
 
-def run_node(make_node: Callable[[], Node], name: str, args: list[str] | None = None) -> int:
+def run_node(make_node: Callable[[], Node], name: str, args: list[str] | None = None, *,
+             num_threads: int = 1) -> int:
     """The ``main`` of a node executable: lightfast's DDS profile, init, spin until Ctrl-C / SIGTERM, clean up.
+    ``num_threads`` > 1 spins a multi-threaded executor (for nodes whose callback groups may run in parallel).
 
     A :class:`LightfastError` while constructing or spinning (bad parameters, a missing map) ends it with one line
     ``<name>: error: …`` on stderr and exit code 1."""
     use_local_transport()
     rclpy.init(args=args)
     node = None
+    executor: MultiThreadedExecutor | None = None
     try:
         node = make_node()
-        rclpy.spin(node)
+        if num_threads > 1:
+            executor = MultiThreadedExecutor(num_threads=num_threads)
+            executor.add_node(node)
+            executor.spin()
+        else:
+            rclpy.spin(node)
     except LightfastError as exc:
         print(f"{name}: error: {exc}", file=sys.stderr)
         return 1
@@ -98,6 +106,8 @@ def run_node(make_node: Callable[[], Node], name: str, args: list[str] | None = 
         if rclpy.ok():  # a real error; after a signal the wait set may fail on the shut-down context instead
             raise
     finally:
+        if executor is not None:
+            executor.shutdown(timeout_sec=1.0)
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()

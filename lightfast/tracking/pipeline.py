@@ -44,7 +44,7 @@ from lightfast.tracking.rgbd_odometry import (
     prepare_frame,
 )
 
-__all__ = ["CoarseEstimate", "RGBDTracker", "TrackResult", "TrackerConfig"]
+__all__ = ["CoarseEstimate", "F2MJob", "RGBDTracker", "TrackResult", "TrackerConfig"]
 
 log = logging.getLogger(__name__)
 
@@ -59,6 +59,10 @@ class TrackerConfig(TrackingConfig):
     )
     reference_timeout_s: float = param(0.5, description="A frame whose reference has not arrived after this "
                                        "long (wall time) is finished with its f2f pose.", min=0.0, max=60.0)
+    f2f_finest_level: int = param(
+        1, description="Pyramid level where frame-to-frame tracking stops (1: half resolution); T≈ only seeds the "
+        "frame-to-model step, which always runs down to finest_level.", min=0, max=5
+    )
     f2m_iterations: tuple[int, ...] = param(
         (10, 5, 3), description="Gauss-Newton iterations per level of the f2m step, coarse to fine (it starts at "
         "T≈, close to the solution).", min=1, max=200
@@ -77,6 +81,9 @@ class TrackerConfig(TrackingConfig):
         super().check()
         if len(self.f2m_iterations) != self.pyramid_levels:
             raise ConfigError(f"f2m_iterations has {len(self.f2m_iterations)} entries, expected pyramid_levels="
+                              f"{self.pyramid_levels}")
+        if self.f2f_finest_level >= self.pyramid_levels:
+            raise ConfigError(f"f2f_finest_level={self.f2f_finest_level} must be below pyramid_levels="
                               f"{self.pyramid_levels}")
         if len(self.initial_pose) != 7:
             raise ConfigError(f"initial_pose needs 7 numbers (x y z qx qy qz qw), got {len(self.initial_pose)}")
@@ -131,6 +138,37 @@ class _Pending:
     f2f_seconds: float
 
 
+@dataclass(eq=False)
+class F2MJob:
+    """The f2m alignment of one pending frame against its reference (:meth:`RGBDTracker.start_refine`): prepare the
+    reference and align the frame to it. :meth:`run` reads only the job's own inputs, so it may run on another
+    thread; its outcome is in ``result`` (None: the reference has no valid depth) or ``error``."""
+
+    stamp_ns: int
+    source: RGBDFrame
+    ref_rgb: ArrayLike
+    ref_depth_m: ArrayLike
+    ref_camera: PinholeCamera
+    config: TrackerConfig
+    result: AlignResult | None = None
+    error: TrackingError | None = None
+    seconds: float = 0.0
+
+    def run(self) -> F2MJob:
+        t0 = time.perf_counter()
+        cfg = self.config
+        try:
+            ref = prepare_frame(self.ref_rgb, self.ref_depth_m, self.ref_camera, config=cfg,
+                                name=f"reference {self.stamp_ns}")
+            self.result = align_frames(self.source, ref, config=dataclasses.replace(cfg, iterations=cfg.f2m_iterations),
+                                       use_color=cfg.f2m_color, use_depth=True)
+        except TrackingError as exc:
+            if "no valid depth" not in str(exc):
+                self.error = exc
+        self.seconds = time.perf_counter() - t0
+        return self
+
+
 class RGBDTracker:
     """Two-step RGB-D tracking for one camera; see the module docstring. Call :meth:`reset` with the start pose."""
 
@@ -182,8 +220,9 @@ class RGBDTracker:
         else:
             prev_stamp, prev_frame, T_prev = self._last
             init = self._velocity if cfg.motion_prior == "constant-velocity" else None
-            res = align_frames(frame, prev_frame, init_T_target_source=init, config=cfg, use_color=cfg.f2f_color,
-                               use_depth=True)
+            f2f_cfg = dataclasses.replace(cfg, finest_level=max(cfg.finest_level, cfg.f2f_finest_level))
+            res = align_frames(frame, prev_frame, init_T_target_source=init, config=f2f_cfg,
+                               use_color=cfg.f2f_color, use_depth=True)
             T_rel = res.T_target_source
             self._velocity = T_rel if res.converged else np.eye(4)
             T = T_prev @ T_rel
@@ -217,29 +256,38 @@ class RGBDTracker:
 
         Earlier pending frames stay pending (see :meth:`expired` and :meth:`skip_reference`).
         Raises :class:`TrackingError` if the frame is not pending or the reference is malformed (the frame stays
-        pending)."""
+        pending). The same as :meth:`finish_refine` of :meth:`start_refine`'s job after :meth:`F2MJob.run`."""
+        job = self.start_refine(stamp_ns, ref_rgb, ref_depth_m)
+        return self.finish_refine(job.run())
+
+    def start_refine(self, stamp_ns: int, ref_rgb: ArrayLike, ref_depth_m: ArrayLike) -> F2MJob:
+        """The f2m work of the pending frame ``stamp_ns`` as a job that touches no tracker state: run it on another
+        thread (its kernels release the GIL) while this tracker goes on with f2f, then :meth:`finish_refine`."""
         stamp = int(stamp_ns)
         if stamp not in self._pending:
             raise TrackingError(f"no pending frame with stamp {stamp} (late or unknown reference)")
-        p = self._pending[stamp]
-        t0 = time.perf_counter()
-        cfg = self.config
         half = self.camera.scaled(0.5)
         ref_shape = np.shape(ref_depth_m)[:2]
         if ref_shape not in (self.camera.shape, half.shape):
             raise TrackingError(f"reference {stamp}: depth image {ref_shape} is neither the camera's size "
                                 f"{self.camera.shape} nor half of it {half.shape}")
-        try:
-            ref = prepare_frame(ref_rgb, ref_depth_m, self.camera if ref_shape == self.camera.shape else half,
-                                config=cfg, name=f"reference {stamp}")
-        except TrackingError as exc:
-            if "no valid depth" in str(exc):
-                return self._finish(stamp, p.T_best, "f2f", "reference has no valid depth", None,
-                                    {"f2m": time.perf_counter() - t0})
-            raise
-        res = align_frames(p.frame, ref, config=dataclasses.replace(cfg, iterations=cfg.f2m_iterations),
-                           use_color=cfg.f2m_color, use_depth=True)
-        seconds = {"f2m": time.perf_counter() - t0}
+        return F2MJob(stamp, self._pending[stamp].frame, ref_rgb, ref_depth_m,
+                      self.camera if ref_shape == self.camera.shape else half, self.config)
+
+    def finish_refine(self, job: F2MJob) -> TrackResult:
+        """Finish the frame of a job that has run: its f2m pose, or its f2f pose if the f2m result is rejected.
+        Raises :class:`TrackingError` if the frame was finished meanwhile (a reset, a timeout) or the reference
+        was malformed (the frame stays pending)."""
+        stamp = job.stamp_ns
+        p = self._pending.get(stamp)
+        if p is None or p.frame is not job.source:
+            raise TrackingError(f"frame {stamp} was finished while its reference was aligned")
+        if job.error is not None:
+            raise job.error
+        res, seconds = job.result, {"f2m": job.seconds}
+        if res is None:
+            return self._finish(stamp, p.T_best, "f2f", "reference has no valid depth", None, seconds)
+        cfg = self.config
         dt = float(np.linalg.norm(res.T_target_source[:3, 3]))
         dr = float(rotation_angle_deg(res.T_target_source[:3, :3]))
         if not res.converged:

@@ -123,6 +123,9 @@ class TrackingConfig(Config):
         1e-4, description="Stop a level when the update norm |xi| falls below this (1e-4: 0.1 mm / 0.006 deg).",
         min=0.0,
     )
+    finest_level: int = param(
+        0, description="Pyramid level where the alignment stops: 0 = full resolution, 1 = half, ...", min=0, max=5
+    )
     finest_point_step: int = param(
         2, description="Source points at the finest level: every pixel (1), a checkerboard (2) or every second row "
         "and column (4); the reference keeps every pixel.", choices=(1, 2, 4)
@@ -132,6 +135,8 @@ class TrackingConfig(Config):
     )
 
     def check(self) -> None:
+        if self.finest_level >= self.pyramid_levels:
+            raise ConfigError(f"finest_level={self.finest_level} must be below pyramid_levels={self.pyramid_levels}")
         if len(self.iterations) != self.pyramid_levels:
             raise ConfigError(
                 f"TrackingConfig.iterations has {len(self.iterations)} entries, expected pyramid_levels="
@@ -516,7 +521,7 @@ def _align_pyramids(
     total_iterations = 0
     level_converged = False
     terms = _Terms(np.zeros((6, 6)), np.zeros(6), 0, 0, math.inf)
-    for level in reversed(range(cfg.pyramid_levels)):
+    for level in reversed(range(cfg.finest_level, cfg.pyramid_levels)):
         n_iter = cfg.iterations[cfg.pyramid_levels - 1 - level]
         level_converged = False
         for _ in range(n_iter):
@@ -538,8 +543,9 @@ def _align_pyramids(
             # iteration budget used up: accept if the last step was small relative to the motion scale
             level_converged = terms.count >= _MIN_CORRESPONDENCES and float(np.linalg.norm(xi)) < 1e-3
     # statistics of the last linearisation at the finest level (before its final, small step)
-    final = terms if total_iterations else _linearize(src[0], tgt[0], T, cfg, use_color, use_depth)
-    n_valid = max(len(src[0].points), 1)
+    finest = cfg.finest_level
+    final = terms if total_iterations else _linearize(src[finest], tgt[finest], T, cfg, use_color, use_depth)
+    n_valid = max(len(src[finest].points), 1)
     inlier_ratio = final.inliers / n_valid
     converged = level_converged and final.count >= _MIN_CORRESPONDENCES and inlier_ratio >= cfg.min_inlier_ratio
     residual = final.cost if final.count else math.inf

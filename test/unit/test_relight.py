@@ -147,6 +147,40 @@ def test_tracker_pipelining_skip_and_errors(room, true_crf):
     assert r2.source == "f2f" and "depth" in r2.reason
 
 
+def test_f2m_job_runs_apart_from_the_tracker_state(room, true_crf):
+    """start_refine → run (another thread in the node) → finish_refine is refine; a frame finished meanwhile
+    (reset, timeout) refuses the job's result."""
+    lmap, sun = room
+    rgb0, d0 = live_frame(lmap, sun, true_crf, T0)
+    rl = DaylightRelighter(lmap, true_crf)
+    rl.set_sun_radiosity(sun, epoch_ns=1)
+    T_off = compose(T0, se3_exp([0.02, 0.0, 0.0, 0.0, 0.0, 0.0]))
+    ref = rl.step(0, rgb0, T_off, CAMERA)  # the first frame's T≈ is the start pose
+    results = []
+    for split in (False, True):
+        tracker = RGBDTracker(CAMERA)
+        tracker.reset(T_off)
+        tracker.track_coarse(0, rgb0, d0)
+        if split:
+            job = tracker.start_refine(0, ref.color, ref.depth_m)
+            assert tracker.pending_stamps == [0]  # nothing changes until the job is finished
+            results.append(tracker.finish_refine(job.run()))
+        else:
+            results.append(tracker.refine(0, ref.color, ref.depth_m))
+    assert results[0].source == results[1].source == "f2m"
+    np.testing.assert_allclose(results[0].T_map_cam, results[1].T_map_cam, atol=1e-12)
+    tracker = RGBDTracker(CAMERA)
+    tracker.reset(T_off)
+    tracker.track_coarse(0, rgb0, d0)
+    job = tracker.start_refine(0, ref.color, ref.depth_m).run()
+    tracker.skip_reference(0, "timeout")
+    with pytest.raises(TrackingError, match="finished while"):
+        tracker.finish_refine(job)
+    with pytest.raises(TrackingError, match="neither the camera"):
+        tracker.track_coarse(1, rgb0, d0)
+        tracker.start_refine(1, ref.color[:10], ref.depth_m[:10])
+
+
 def test_sun_epoch_assembler_swaps_only_complete_epochs():
     a = SunEpochAssembler(10)
     B = np.arange(30, dtype=np.float32).reshape(10, 3)
