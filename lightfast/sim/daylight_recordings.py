@@ -43,8 +43,7 @@ Output of :func:`generate_daylight_set` in ``OUT``::
                                     /camera/depth/image_raw (16UC1, millimetres, 0 = invalid),
                                     /camera/depth/camera_info, /ground_truth/pose (PoseStamped T_map_camera in
                                     frame ``map``); images in ``camera_color_optical_frame``; stamps = true UTC
-    DS1.T1/mesh.ply, map.ply,       hard links to (or copies of) the shared scene files (true mesh, the
-           site.yaml                method's map, site)
+    DS1.T1/mesh.ply, site.yaml      hard links to (or copies of) the shared scene files (true mesh, site)
     DS1.T1/camera.yaml              the true camera: CRF (model and 256-sample forward/inverse tables), exposure
                                     time, gain, sensitivity, noise, depth sensor, intrinsics
     DS1.T1/truth.csv                per frame: sun position, cloud transmittance, DNI/DHI/GHI and the RGB scales
@@ -126,7 +125,7 @@ log = logging.getLogger(__name__)
 FORMAT_VERSION = 3  # 2: gaze angular rates limited (the look-at gaze whipped at up to 900°/s near targets);
 # 3: depth from the depth camera (time offset, registration error, projector shadow, correlated + systematic error)
 #: Bump when the reconstructed map of the same scene changes.
-MAP_FORMAT_VERSION = 1
+MAP_FORMAT_VERSION = 2  # 2: zero-area slivers and non-manifold edges removed
 #: Limits of the gaze's angular rates (before the hand jitter), like a person panning a hand-held camera.
 MAX_YAW_RATE_DEG_S = 75.0
 MAX_PITCH_RATE_DEG_S = 45.0
@@ -431,7 +430,7 @@ def _complete(seq_dir: Path, digest: str) -> bool:
             return False
     except (OSError, ValueError):
         return False
-    return all((seq_dir / name).exists() for name in ("bag/metadata.yaml", "mesh.ply", "map.ply", "site.yaml",
+    return all((seq_dir / name).exists() for name in ("bag/metadata.yaml", "mesh.ply", "site.yaml",
                                                       "camera.yaml", "truth.csv"))
 
 
@@ -524,7 +523,6 @@ def _generate_sequence(spec: SequenceSpec, scene: DaylightScene, renderer: Groun
             bag.write_message(GT_POSE_TOPIC, t_ns, matrix_to_pose_stamped(poses[i], stamp_ns=t_ns,
                                                                           frame_id=MAP_FRAME, types=types))
     _link_or_copy(scene_files["mesh"], seq_dir / "mesh.ply")
-    _link_or_copy(scene_files["map"], seq_dir / "map.ply")
     _link_or_copy(scene_files["site"], seq_dir / "site.yaml")
     write_text_atomic(seq_dir / "camera.yaml", _camera_yaml(resp, depth_sensor, camera))
     write_text_atomic(seq_dir / "truth.csv", _truth_csv(rows))

@@ -37,6 +37,7 @@ from lightfast.sim.gt_renderer import DepthSensor
 __all__ = ["ReconstructionSettings", "reconstruct_map", "scan_poses"]
 
 F64 = NDArray[np.float64]
+_MIN_AREA_M2 = 1e-12
 
 
 @dataclass(frozen=True)
@@ -163,12 +164,20 @@ def reconstruct_map(scene: DaylightScene, settings: ReconstructionSettings | Non
     clusters, counts, _ = mesh.cluster_connected_triangles()
     clusters, counts = np.asarray(clusters), np.asarray(counts)
     mesh.remove_triangles_by_mask(counts[clusters] < cfg.min_component_triangles)
-    mesh.remove_unreferenced_vertices()
     mesh.remove_degenerate_triangles()
-    vertices = np.asarray(mesh.vertices, dtype=np.float64)
-    faces = np.asarray(mesh.triangles, dtype=np.int64)  # counter-clockwise seen from the free side, as ours
+    mesh.remove_non_manifold_edges()
+    v = np.asarray(mesh.vertices, dtype=np.float64)
+    f = np.asarray(mesh.triangles, dtype=np.int64)  # counter-clockwise seen from the free side, as ours
+    area = 0.5 * np.linalg.norm(np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), axis=1)
+    f = f[area > _MIN_AREA_M2]  # marching cubes makes slivers of zero area where the surface grazes a voxel corner
+    used = np.unique(f)
+    remap = np.full(len(v), -1, dtype=np.int64)
+    remap[used] = np.arange(len(used))
+    vertices, faces = v[used], remap[f]
     rho = _closest_reflectance(scene.mesh, vertices)
     rng_rho = np.random.default_rng([cfg.seed, 8])
     gain = 1.0 + cfg.reflectance_error * np.stack([_smooth_field(vertices, rng_rho) for _ in range(3)], 1)
     gain *= 1.0 + cfg.reflectance_noise * rng_rho.normal(size=gain.shape)
-    return ReflectanceMesh(vertices, faces, np.clip(rho * gain, 0.0, 1.0))
+    out = ReflectanceMesh(vertices, faces, np.clip(rho * gain, 0.0, 1.0))
+    out.validate_topology(min_area_m2=_MIN_AREA_M2)  # what `lightfast daylight prepare` requires
+    return out
