@@ -125,7 +125,7 @@ log = logging.getLogger(__name__)
 FORMAT_VERSION = 3  # 2: gaze angular rates limited (the look-at gaze whipped at up to 900°/s near targets);
 # 3: depth from the depth camera (time offset, registration error, projector shadow, correlated + systematic error)
 #: Bump when the reconstructed map of the same scene changes.
-MAP_FORMAT_VERSION = 2  # 2: zero-area slivers and non-manifold edges removed
+MAP_FORMAT_VERSION = 3  # 2, 3: zero-area slivers (also after float32 rounding), non-manifold edges removed
 #: Limits of the gaze's angular rates (before the hand jitter), like a person panning a hand-held camera.
 MAX_YAW_RATE_DEG_S = 75.0
 MAX_PITCH_RATE_DEG_S = 45.0

@@ -37,7 +37,7 @@ from lightfast.sim.gt_renderer import DepthSensor
 __all__ = ["ReconstructionSettings", "reconstruct_map", "scan_poses"]
 
 F64 = NDArray[np.float64]
-_MIN_AREA_M2 = 1e-12
+_MIN_AREA_M2 = 1e-10  # 0.0001 mm²: safely above zero after float32 rounding
 
 
 @dataclass(frozen=True)
@@ -166,7 +166,7 @@ def reconstruct_map(scene: DaylightScene, settings: ReconstructionSettings | Non
     mesh.remove_triangles_by_mask(counts[clusters] < cfg.min_component_triangles)
     mesh.remove_degenerate_triangles()
     mesh.remove_non_manifold_edges()
-    v = np.asarray(mesh.vertices, dtype=np.float64)
+    v = np.asarray(mesh.vertices).astype(np.float32).astype(np.float64)  # as a PLY file holds them
     f = np.asarray(mesh.triangles, dtype=np.int64)  # counter-clockwise seen from the free side, as ours
     area = 0.5 * np.linalg.norm(np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), axis=1)
     f = f[area > _MIN_AREA_M2]  # marching cubes makes slivers of zero area where the surface grazes a voxel corner
