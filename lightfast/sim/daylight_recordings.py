@@ -573,6 +573,7 @@ def _scene_files(out: Path, scene: DaylightScene, *, progress: bool = False) -> 
             "faces": scene.mesh.num_faces, "resolution_m": scene.resolution_m, "site": scene.site.to_yaml(),
             "map": {"format_version": MAP_FORMAT_VERSION, "reconstruction": asdict(recon),
                     "depth_sensor": asdict(DepthSensor())}}
+    meta = json.loads(json.dumps(meta))  # tuples as lists, as read back
     try:
         same = (json.loads(meta_path.read_text()) == meta and mesh_path.is_file() and site_path.is_file()
                 and map_path.is_file())

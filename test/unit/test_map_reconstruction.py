@@ -42,3 +42,13 @@ def test_reconstructed_map_is_near_the_true_surface_but_not_it() -> None:
     rho_true = scene.mesh.reflectance[scene.mesh.faces[tri]].mean(axis=1)
     rel = np.abs(recon.reflectance - rho_true) / np.maximum(rho_true, 0.05)
     assert 0.01 < np.median(rel) < 0.15
+
+
+def test_scene_files_reconstruct_once(tmp_path) -> None:  # noqa: ANN001
+    from lightfast.sim.daylight_recordings import _scene_files
+
+    scene = make_ds2(resolution_m=0.3)
+    first = _scene_files(tmp_path, scene)
+    stamp = first["map"].stat().st_mtime_ns
+    again = _scene_files(tmp_path, scene)
+    assert again == first and again["map"].stat().st_mtime_ns == stamp  # cached: no second scan
