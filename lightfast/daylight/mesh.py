@@ -37,9 +37,10 @@ class ReflectanceMesh:
     normals_in: NDArray[np.float64] | None = field(default=None, repr=False)  # (V, 3) optional, from the file
 
     def __post_init__(self) -> None:
-        v = np.ascontiguousarray(self.vertices_m, dtype=np.float64)
-        f = np.ascontiguousarray(self.faces, dtype=np.int64)
-        rho = np.ascontiguousarray(self.reflectance, dtype=np.float64)
+        # own copies: the arrays are made read-only below, which must not freeze the caller's arrays
+        v = np.array(self.vertices_m, dtype=np.float64)
+        f = np.array(self.faces, dtype=np.int64)
+        rho = np.array(self.reflectance, dtype=np.float64)
         if v.ndim != 2 or v.shape[1] != 3 or len(v) < 3:
             raise MeshError(f"vertices must have shape (V>=3, 3), got {v.shape}")
         if not np.all(np.isfinite(v)):
