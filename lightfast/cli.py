@@ -325,6 +325,10 @@ def build_parser() -> argparse.ArgumentParser:
     ev_sub = ev.add_subparsers(dest="eval_command", required=True, metavar="EVALUATION")
     _add_passthrough(ev_sub, "daylight", "lightfast.eval.daylight:main_eval_daylight",
                      "Table I: the tracker and its ablations on the daylight recordings (see `eval daylight --help`)")
+    _add_passthrough(ev_sub, "racr", "lightfast.eval.racr:main_eval_racr",
+                     "rACR vs ACR and its ablations on the simulated scenes, Tables 2/4/5 (see `eval racr --help`)")
+    _add_passthrough(ev_sub, "vtr", "lightfast.eval.vtr:main_eval_vtr",
+                     "VT&R Table I / Fig. 7: autonomy by distance over the simulated day (see `eval vtr --help`)")
     _add_passthrough(ev_sub, "recording", "lightfast.eval.recording:main_eval_recording",
                      "score a recorded live run of the tracking nodes against the played bag's ground truth")
 

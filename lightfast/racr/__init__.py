@@ -43,7 +43,13 @@ from lightfast.racr.errors import (
     InitializationError,
     RacrError,
 )
-from lightfast.racr.fast_alignment import FastAlignmentConfig, FastAlignmentResult, ReferenceCloud, fast_align
+from lightfast.racr.fast_alignment import (
+    FastAlignmentConfig,
+    FastAlignmentResult,
+    ReferenceCloud,
+    fast_align,
+    fast_align_best,
+)
 from lightfast.racr.fine_alignment import (
     FineAlignmentConfig,
     FineAlignmentResult,
@@ -102,6 +108,7 @@ __all__ = [
     "adjustment_step",
     "camera_pose_in_reference",
     "fast_align",
+    "fast_align_best",
     "fine_align",
     "hand_eye_rotation",
     "hand_eye_translation",

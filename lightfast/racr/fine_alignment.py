@@ -32,6 +32,7 @@ The optimisation follows §3.4.3:
    use) and ``σ_p`` (as ``log σ_p``, scaled about the centroid of the current points, which decouples it from
    ``t_p``) with the keyframes fixed, until ``‖ΔT_p − I₄‖_F ≤ τ_T`` and ``|Δσ_p| ≤ τ_σ`` (the fast alignment's
    tolerances) or ``max_outer_iterations``. Every outer iteration re-matches E_g and refreshes the robust weights.
+   ``estimate_scale=False`` solves Eq. 17 alone with ``σ_p = sigma_init`` fixed: the paper's ablation rACR-S (§5.4).
 
 Solver: SciPy ``least_squares(method="lm")`` — MINPACK's Levenberg–Marquardt, the paper's LM — with analytic
 Jacobians and ``x_scale="jac"``: rotation (rad), translation (m) and log-scale differ in sensitivity by orders of
@@ -164,6 +165,9 @@ class FineAlignmentConfig(Config):
     scale_update: str = param(
         "joint", description="Eq. 17 then Eq. 18 as separate LM solves (the paper), or one joint LM solve.",
         choices=SCALE_UPDATES,
+    )
+    estimate_scale: bool = param(
+        True, description="Optimise sigma_p (Eq. 18); False keeps sigma_init fixed and solves Eq. 17 only (rACR-S).",
     )
     pose_tolerance: float = param(1e-4, description="tau_T: stop when ||dT_p - I4||_F <= this.", min=0.0)
     scale_tolerance: float = param(1e-5, description="tau_sigma: ... and |d sigma_p| <= this.", min=0.0)
@@ -761,7 +765,9 @@ def fine_align(
         problem.set_scales(*scales)
         problem.reweight(R, t, sigma)
         R_prev, t_prev, sigma_prev = R, t, sigma
-        if config.scale_update == "joint":
+        if not config.estimate_scale:  # rACR-S: Eq. 17 only
+            R, t = _pose_step(problem, R, t, sigma)
+        elif config.scale_update == "joint":
             R, t, sigma = _joint_step(problem, R, t, sigma)
         else:
             R, t = _pose_step(problem, R, t, sigma)
