@@ -48,6 +48,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
+from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 
@@ -87,6 +88,8 @@ SCHEME_MODES = ("parallel", "serial")
 #: ``platform_timeout_s``; the thread died (see ``status.error``).
 SCHEME_STAGES = ("waiting_for_vse", "aligning", "ready", "moving", "converged", "platform_timeout", "failed")
 _MIN_POINTS = 30
+#: Fast-alignment results remembered to recognize a cycle (see :meth:`RacrScheme._settled`).
+_SETTLE_HISTORY = 4
 
 
 class SchemeError(RacrError):
@@ -294,6 +297,7 @@ class RacrScheme:
         self._adjustments = 0
         self._counts = {"fast": 0, "fine": 0, "failures": 0}
         self._fast_converged = False
+        self._fast_history: deque[tuple[int, Array, float]] = deque(maxlen=_SETTLE_HISTORY)
         self._last_alignment_error: str | None = None
         self._timeout_logged = False
         self._thread: threading.Thread | None = None
@@ -553,7 +557,8 @@ class RacrScheme:
             assert result is not None
             self._counts[job.kind] += 1
             if isinstance(result, FastAlignmentResult):
-                converged = result.converged or self._settled(est, obs.seq, result)
+                converged = result.converged or self._settled(obs.seq, result)
+                self._fast_history.append((obs.seq, result.T_ref_cur.copy(), result.sigma))
                 self._fast_converged = converged
                 complete = converged and not self.config.fine_alignment
                 obs.done = complete
@@ -570,19 +575,22 @@ class RacrScheme:
                 obs.done = True
             self._wake.notify_all()
 
-    def _settled(self, est: _Estimate | None, seq: int, result: FastAlignmentResult) -> bool:
-        """A fast alignment that ran out of iterations on the same cloud twice and ended where it ended before
-        (within ``settle_factor`` times the tolerances τ_T, τ_σ) has converged for all purposes: the robust ICP
-        can cycle between nearly equal states without ever meeting τ_T = 1e-4 (seen on real-density clouds)."""
-        if est is None or est.kind != "fast" or est.seq != seq:
-            return False
-        dR = est.T_ref_cur[:3, :3].T @ result.T_ref_cur[:3, :3]
-        dt = result.T_ref_cur[:3, 3] - est.T_ref_cur[:3, 3]
-        change = float(np.sqrt(np.sum((dR - np.eye(3)) ** 2) + np.sum(dt**2)))
+    def _settled(self, seq: int, result: FastAlignmentResult) -> bool:
+        """A fast alignment that ran out of iterations on the same cloud and ended where one of its last
+        ``_SETTLE_HISTORY`` runs on that cloud ended (within ``settle_factor`` times the tolerances τ_T, τ_σ) has
+        converged for all purposes: the robust ICP can cycle between a few nearly equal states without ever
+        meeting τ_T = 1e-4 (seen on real-density clouds, and as a 3-cycle on a simulated one)."""
         k = self.config.settle_factor
-        return change <= k * self.fast_config.pose_tolerance and (
-            abs(result.sigma - est.sigma) <= k * self.fast_config.scale_tolerance
-        )
+        for prev_seq, T_prev, sigma_prev in self._fast_history:
+            if prev_seq != seq:
+                continue
+            dR = T_prev[:3, :3].T @ result.T_ref_cur[:3, :3]
+            dt = result.T_ref_cur[:3, 3] - T_prev[:3, 3]
+            change = float(np.sqrt(np.sum((dR - np.eye(3)) ** 2) + np.sum(dt**2)))
+            if (change <= k * self.fast_config.pose_tolerance
+                    and abs(result.sigma - sigma_prev) <= k * self.fast_config.scale_tolerance):
+                return True
+        return False
 
     # ------------------------------------------------------------------ status
     @property

@@ -320,3 +320,22 @@ def test_bad_input_is_refused_at_the_call(scene, reference) -> None:
             scheme.next_alignment_job()
     finally:
         scheme.stop()
+
+
+def test_a_fast_alignment_cycling_between_nearly_equal_states_counts_as_settled(reference) -> None:
+    """The robust ICP may cycle (seen: σ 0.98885 → 0.98895 → 0.98894 → 0.98885 …, each at max_iterations): a result
+    that repeats any of the last few on the same cloud settles, not only one that repeats the latest."""
+    from lightfast.racr.fast_alignment import FastAlignmentResult
+
+    scheme = RacrScheme(reference, T_REF_CAM, X_EST)
+
+    def result(sigma: float) -> FastAlignmentResult:
+        return FastAlignmentResult(np.eye(4), sigma, 100, False, 500, 0.9, 0.01, 1e-3, 1e-4, 500, 0.1)
+
+    cycle = [0.98885, 0.98905, 0.98925, 0.98885]  # consecutive changes 2e-4 > settle_factor · τ_σ = 1e-4
+    settled = []
+    for sigma in cycle:
+        settled.append(scheme._settled(7, result(sigma)))
+        scheme._fast_history.append((7, np.eye(4), sigma))
+    assert settled == [False, False, False, True]
+    assert not scheme._settled(8, result(0.98885))  # another cloud: its own history
