@@ -11,12 +11,16 @@ Per configuration (mode × front-end threads × feature budget × lighting), eve
 :meth:`lightfast.vtr.RepeatPipeline.step` (images in: colour-constant images, features, left–right matching,
 triangulation of the mode's sources, VO, windowed localization). The first frame (whole-map search for the
 initial localization) is reported apart; the rates are medians over the remaining frames. "Hz by CPU" is
-1 / (CPU seconds of this process per frame, all threads): the rate on otherwise idle cores, since the wall clock on
-this shared machine includes waiting for other jobs. The stage split of the default fused configuration times
+1 / (CPU seconds of this process per frame, all threads): the rate on one otherwise idle core, since the wall clock
+on this shared machine includes waiting for other jobs. "Hz on 2 idle cores" estimates the rate with the front-end
+threads on two otherwise idle cores: a frame takes at least the CPU time of the calling thread (the part that does
+not run in the thread pool: colour-constant images wait, matching, VO, localization) and at least half of the
+CPU time of all threads, so 1 / max(calling-thread CPU, CPU / 2) per frame (an upper bound of the achievable rate;
+it is the rate if the pool keeps the second core busy). The stage split of the default fused configuration times
 the front end's stages separately on the same frames (the operations of
 :meth:`lightfast.vtr.StereoFrontEnd.source_features`), VO and localization from the pipeline's own timing.
 
-Usage: ``nice -n 10 .venv/bin/python benchmarks/vtr_localization.py [--repeats 1]``; writes
+Usage: ``nice -n 10 .venv/bin/python benchmarks/vtr_localization.py [--output FILE.md]``; writes
 ``benchmarks/results/vtr_localization.md`` and ``.json`` (atomically).
 """
 from __future__ import annotations
@@ -81,6 +85,7 @@ class Run:
     lighting: str
     wall_ms: list[float] = field(default_factory=list)
     cpu_ms: list[float] = field(default_factory=list)
+    main_ms: list[float] = field(default_factory=list)
     stages_ms: dict[str, list[float]] = field(default_factory=dict)
     first_ms: float = float("nan")
     localized: list[bool] = field(default_factory=list)
@@ -89,11 +94,14 @@ class Run:
 
     def summary(self) -> dict:
         wall, cpu = float(np.median(self.wall_ms)), float(np.median(self.cpu_ms))
+        # on two idle cores a frame needs at least its calling thread's CPU time and half of all CPU time
+        ideal = float(np.median(np.maximum(np.asarray(self.main_ms), 0.5 * np.asarray(self.cpu_ms))))
         return {
             "name": self.name, "mode": self.mode, "features": self.budget, "workers": self.workers,
             "lighting": self.lighting, "frames": len(self.wall_ms), "wall_ms_median": wall,
             "wall_ms_p90": float(np.percentile(self.wall_ms, 90)), "hz": 1000.0 / wall, "cpu_ms_median": cpu,
-            "hz_cpu": 1000.0 / cpu, "first_frame_ms": self.first_ms,
+            "hz_cpu": 1000.0 / cpu, "main_thread_ms_median": float(np.median(self.main_ms)),
+            "hz_2_idle_cores": 1000.0 / ideal, "first_frame_ms": self.first_ms,
             "stages_ms_median": {k: float(np.median(v)) for k, v in self.stages_ms.items()},
             "localized": float(np.mean(self.localized)),
             "inliers_median": {k: float(np.median(v)) for k, v in self.inliers.items()},
@@ -122,14 +130,16 @@ def teach(scene: Scene, frames: list, stereo: StereoConfig, path: Path) -> tuple
 def run_repeat(run: Run, scene: Scene, teach_map, kf_pose, frames: list, stereo: StereoConfig) -> Run:
     rp = RepeatPipeline(teach_map, RepeatConfig(mode=run.mode, workers=run.workers), stereo=stereo)
     for i, (left, right) in enumerate(frames):
-        t0, c0 = time.perf_counter(), time.process_time()
+        t0, c0, m0 = time.perf_counter(), time.process_time(), time.thread_time()
         res = rp.step(i * STAMP_STEP_NS, left, right, scene.P_left, scene.P_right)
         wall, cpu = 1000.0 * (time.perf_counter() - t0), 1000.0 * (time.process_time() - c0)
+        main = 1000.0 * (time.thread_time() - m0)
         if i == 0:
             run.first_ms = wall
             continue
         run.wall_ms.append(wall)
         run.cpu_ms.append(cpu)
+        run.main_ms.append(main)
         for k, v in res.timing_s.items():
             run.stages_ms.setdefault(k, []).append(1000.0 * v)
         run.localized.append(res.localized)
@@ -143,18 +153,19 @@ def run_repeat(run: Run, scene: Scene, teach_map, kf_pose, frames: list, stereo:
 
 
 def front_end_stages(scene: Scene, frames: list, stereo: StereoConfig) -> dict[str, list[float]]:
-    """Per frame, the front end's stages for the three sources, timed separately (ms)."""
+    """Per frame, the front end's stages for the three sources, timed separately (CPU ms of this thread: the
+    work, independent of the other jobs on the machine)."""
     color = ColorConstantConfig()
     extractor = FeatureExtractor(stereo)
     out: dict[str, list[float]] = {"colour-constant + grey images": [], "feature detection (6 images)": [],
                                    "left-right matching, sub-pixel, triangulation": []}
     for left, right in frames:
-        t0 = time.perf_counter()
+        t0 = time.thread_time()
         ls, rs = image_sources(left, color, SOURCES), image_sources(right, color, SOURCES)
-        t1 = time.perf_counter()
+        t1 = time.thread_time()
         feats = {s: (extractor.detect(ls[s].image, ls[s].valid), extractor.detect(rs[s].image, rs[s].valid))
                  for s in SOURCES}
-        t2 = time.perf_counter()
+        t2 = time.thread_time()
         for s in SOURCES:
             fl, fr = feats[s]
             il, ir, _ = match_stereo(fl, fr, stereo)
@@ -165,7 +176,7 @@ def front_end_stages(scene: Scene, frames: list, stereo: StereoConfig) -> dict[s
                                            search=stereo.subpixel_search_px)
                 uvr = np.stack([uvl[:, 0] - disp, uvr[:, 1]], axis=1)
             triangulate(scene.P_left, scene.P_right, uvl, uvr)
-        t3 = time.perf_counter()
+        t3 = time.thread_time()
         for k, dt in zip(out, (t1 - t0, t2 - t1, t3 - t2), strict=True):
             out[k].append(1000.0 * dt)
     return out
@@ -181,13 +192,16 @@ def report(runs: list[dict], stages: dict[str, float], teach_ms: dict[str, float
         "Per frame `RepeatPipeline.step` with images in (colour-constant images, ORB features, left–right matching "
         "and triangulation of the mode's sources, greyscale VO, localization against a 5-keyframe window). Medians "
         "over all frames but the first (whole-map search for the initial localization: 'first frame'). "
-        "'Hz by CPU' = 1 / CPU time of this process per frame (all threads): the rate on idle cores; the wall clock "
-        "includes waiting for the other jobs on this shared 2-core machine "
+        "'Hz by CPU' = 1 / CPU time of this process per frame (all threads): the rate on one idle core; "
+        "'Hz on 2 idle cores' = 1 / max(CPU time of the calling thread, CPU time / 2): the rate with the front-end "
+        "threads on two idle cores (an upper bound; see the script's docstring). The wall clock includes waiting "
+        "for the other jobs on this shared 2-core machine "
         f"(load average {meta['load_before']:.1f} before, {meta['load_after']:.1f} after).",
         "",
-        "| mode | features | threads | lighting | wall ms (p90) | **Hz** | CPU ms | Hz by CPU | first frame ms "
-        "| localized | median inliers grey / F_v / F_r | error median (max) cm |",
-        "|---|---|---:|---|---:|---:|---:|---:|---:|---:|---|---:|",
+        "| mode | features | threads | lighting | wall ms (p90) | **Hz** | CPU ms | Hz by CPU | calling thread "
+        "CPU ms | Hz on 2 idle cores | first frame ms | localized | median inliers grey / F_v / F_r | error median "
+        "(max) cm |",
+        "|---|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---|---:|",
     ]
     for r in runs:
         ins = " / ".join(f"{r['inliers_median'].get(s, 0):.0f}" if s in r["inliers_median"] else "–" for s in SOURCES)
@@ -195,13 +209,15 @@ def report(runs: list[dict], stages: dict[str, float], teach_ms: dict[str, float
         lines.append(
             f"| {r['mode']} | {r['features']} | {r['workers']} | {r['lighting']} | {r['wall_ms_median']:.0f} "
             f"({r['wall_ms_p90']:.0f}) | **{r['hz']:.1f}** | {r['cpu_ms_median']:.0f} | {r['hz_cpu']:.1f} | "
-            f"{r['first_frame_ms']:.0f} | {100 * r['localized']:.0f} % | {ins} | {err} |"
+            f"{r['main_thread_ms_median']:.0f} | {r['hz_2_idle_cores']:.1f} | {r['first_frame_ms']:.0f} | "
+            f"{100 * r['localized']:.0f} % | {ins} | {err} |"
         )
     total = sum(stages.values())
     lines += [
         "",
         "Stage split, fused mode, default features, one thread, changed lighting (median ms per frame; front-end "
-        "stages timed separately on the same frames, VO and localization from the pipeline):",
+        "stages timed separately on the same frames by CPU time, VO and localization from the pipeline's wall-clock "
+        "timing of the one-thread run):",
         "",
         "| stage | ms | share |",
         "|---|---:|---:|",
@@ -270,16 +286,19 @@ def main() -> None:
     stages["greyscale VO (matching, RANSAC, refinement)"] = ref["stages_ms_median"]["vo"]
     stages["localization (3 sources: window matching, one RANSAC, refinement)"] = ref["stages_ms_median"][
         "localization"]
-    best = max((r for r in runs if r["mode"] == "fused" and r["lighting"] == "changed"), key=lambda r: r["hz"])
+    fused = [r for r in runs if r["mode"] == "fused" and r["lighting"] == "changed"]
+    best = max(fused, key=lambda r: r["hz"])
+    best_idle = max(fused, key=lambda r: r["hz_2_idle_cores"])
     goal = 10.0
     verdict = (
-        f"Goal ≥ {goal:.0f} Hz (fused, VO + three-source localization): default configuration "
-        f"{ref['hz']:.1f} Hz wall / {ref['hz_cpu']:.1f} Hz by CPU; best fused configuration "
-        f"({best['features']}, {best['workers']} thread(s)) {best['hz']:.1f} Hz wall / {best['hz_cpu']:.1f} Hz by CPU"
-        f" — goal {'met' if best['hz'] >= goal else 'not met'} on the wall clock"
-        f"{', met by CPU time' if best['hz'] < goal <= best['hz_cpu'] else ''}. "
-        "The front end (six ORB extractions per stereo frame, three sources) dominates; VO and localization are "
-        "a small share."
+        f"Goal ≥ {goal:.0f} Hz on 2 cores (fused, VO + three-source localization): default configuration, one "
+        f"thread {ref['hz']:.1f} Hz wall / {ref['hz_cpu']:.1f} Hz by CPU; best fused wall clock "
+        f"({best['features']}, {best['workers']} thread(s)) {best['hz']:.1f} Hz — goal "
+        f"{'met' if best['hz'] >= goal else 'not met'} on the wall clock of this shared machine (load average "
+        f"{load_before:.1f}); estimated on 2 idle cores: {best_idle['hz_2_idle_cores']:.1f} Hz "
+        f"({best_idle['features']}, {best_idle['workers']} thread(s)) — "
+        f"{'met' if best_idle['hz_2_idle_cores'] >= goal else 'not met'}. "
+        "The six ORB extractions per stereo frame dominate the CPU time."
     )
     meta = {
         "load_before": load_before, "load_after": os.getloadavg()[0], "verdict": verdict,

@@ -128,8 +128,8 @@ RIGHT_FRAME = "stereo_right_optical_frame"
 #: Topics of every run's bag, in writing order (with ``GT_POSE_TOPIC``).
 TOPICS = (LEFT_IMAGE_TOPIC, RIGHT_IMAGE_TOPIC, LEFT_INFO_TOPIC, RIGHT_INFO_TOPIC, GT_POSE_TOPIC)
 
-#: Bump when the output of the same parameters changes.
-FORMAT_VERSION = 1
+#: Bump when the output of the same parameters changes (2: micro-relief shading in the renderer).
+FORMAT_VERSION = 2
 
 #: The CSA Mars Emulation Terrain, Saint-Hubert (Montreal), Quebec; map frame = ENU.
 MET_SITE = Site(latitude_deg=45.5175, longitude_deg=-73.3925, altitude_m=25.0, timezone="America/Toronto",

@@ -64,7 +64,12 @@ Per pixel (both stereo views in one batch): an Embree primary ray; Lambertian sh
   trunks, with ``E_glob`` the global horizontal irradiance and ``ρ_env`` the mean of the sand, grass, soil, rock
   and litter spectra;
 
-so shadows are lit by bluish skylight (plus some green under trees). Sky pixels see ``E_sky / π`` times a
+so shadows are lit by bluish skylight (plus some green under trees). Ground, rocks and trunks carry a micro-relief
+below the mesh resolution (sand ripples and grains, rock roughness, bark ridges): the shading normal is tilted by
+facet slopes up to :data:`BUMP_SLOPE` (0.5 ground, 0.6 rock, 0.5 bark; from the texture's "mid" noise channel at
+two unrelated points, mip-averaged like the albedo so that the relief smooths out with distance), so that sunlit
+surfaces show a shading texture that changes with the sun's direction while sky-lit shadow keeps the albedo
+texture only. Sky pixels see ``E_sky / π`` times a
 gradient (clear: brighter towards the horizon; overcast: CIE overcast ``(1 + 2 sin el)``). The spectral
 integral is exact on the 10 nm grid and vectorized as matrix products over wavelength: with per-pixel basis
 weights ``W`` (pixels × basis) and ``A_k = (ρ_basis ⊙ E_k(λ)) · S(λ) Δλ / π`` (basis × channels, a product
@@ -166,6 +171,9 @@ _B = {name: i for i, name in enumerate(BASIS)}
 
 #: Bump when the scene or the rendering of the same parameters changes.
 SCENE_FORMAT_VERSION = 1
+#: Largest micro-relief facet slope (tan of the tilt) per surface kind: ground, rock, trunk, foliage (see the
+#: module docstring, "Renderer").
+BUMP_SLOPE = (0.5, 0.6, 0.5, 0.0)
 
 _F32 = NDArray[np.float32]
 _F64 = NDArray[np.float64]
@@ -574,9 +582,11 @@ def _shade_kernel(origins: _F64, view: NDArray[np.int64], t: _F32, d: _F32, tri:
                   faces: NDArray[np.int64], face_normals: _F32, face_kind: NDArray[np.int8], vdata: _F32,
                   smooth: NDArray[np.bool_], tex: _F32, tex_offsets: NDArray[np.int64], tex_size: int,
                   tex_levels: int, textured: bool, k_fine: float, k_coarse: float, fx_px: float,
-                  p_out: _F64, ng_out: _F32, n_out: _F32, vis_out: _F32, W: _F32) -> None:
-    """Per hit pixel: position, facing geometric and shading normals, interpolated hemisphere fractions and basis
-    weights (mixture × brightness; see :class:`SpectralRenderer`). ``W`` must be zero on entry."""
+                  bump: NDArray[np.float64], p_out: _F64, ng_out: _F32, n_out: _F32, vis_out: _F32,
+                  W: _F32) -> None:
+    """Per hit pixel: position, facing geometric and shading normals (with the micro-relief of ``bump``, the
+    largest facet slope per surface kind), interpolated hemisphere fractions and basis weights (mixture ×
+    brightness; see :class:`SpectralRenderer`). ``W`` must be zero on entry."""
     ca, sa = math.cos(0.6) * k_coarse, math.sin(0.6) * k_coarse
     for i in range(len(t)):
         o = origins[view[i]]
@@ -622,8 +632,28 @@ def _shade_kernel(origins: _F64, view: NDArray[np.int64], t: _F32, d: _F32, tri:
             u = p1 if (a0 >= a1 and a0 >= a2) else p0
             v = p1 if (a2 > a0 and a2 > a1) else z
             off = 0.0 if kind == KIND_GROUND else kind * 1234.5 + r1 * 5000.0
-            f0, f1, _, f3 = _tex_sample(tex, tex_offsets, tex_size, tex_levels, u * k_fine + off,
-                                        v * k_fine + 0.37 * off, foot * k_fine)
+            f0, f1, f2, f3 = _tex_sample(tex, tex_offsets, tex_size, tex_levels, u * k_fine + off,
+                                         v * k_fine + 0.37 * off, foot * k_fine)
+            slope = bump[kind]
+            if slope > 0.0:
+                # micro-relief below the mesh resolution: facet slopes along the texture's (u, v) axes from the
+                # "mid" noise channel at this point and at an unrelated one (mip-averaged like the albedo, so
+                # the relief smooths out with distance), applied to the shading normal
+                h2 = _tex_sample(tex, tex_offsets, tex_size, tex_levels, u * k_fine + off + 517.0,
+                                 v * k_fine + 0.37 * off + 211.0, foot * k_fine)[2]
+                su = slope * (2.0 * f2 - 1.0)
+                sv = slope * (2.0 * h2 - 1.0)
+                if a0 >= a1 and a0 >= a2:  # u = y, v = z
+                    m0, m1, m2 = n0, n1 - su, n2 - sv
+                elif a2 > a0 and a2 > a1:  # u = x, v = y
+                    m0, m1, m2 = n0 - su, n1 - sv, n2
+                else:  # u = x, v = z
+                    m0, m1, m2 = n0 - su, n1, n2 - sv
+                lm = math.sqrt(m0 * m0 + m1 * m1 + m2 * m2) + 1e-12
+                m0, m1, m2 = m0 / lm, m1 / lm, m2 / lm
+                if m0 * g0 + m1 * g1 + m2 * g2 > 0.05:  # facets stay on the visible side
+                    n0, n1, n2 = m0, m1, m2
+                    n_out[i, 0], n_out[i, 1], n_out[i, 2] = n0, n1, n2
             if kind <= KIND_ROCK:
                 c0, c1, c2, _ = _tex_sample(tex, tex_offsets, tex_size, tex_levels, ca * u - sa * v + off + 333.0,
                                             sa * u + ca * v + 777.0, foot * k_coarse)
@@ -1266,7 +1296,8 @@ class SpectralRenderer:
     SUN_RADIUS_RAD = math.radians(0.2666)
 
     def __init__(self, scene: RouteScene, *, texture: bool = True, sensitivity: str = CAMERA_SENSITIVITY,
-                 fine_texel_m: float = 0.015, coarse_texel_m: float = 0.124) -> None:
+                 fine_texel_m: float = 0.015, coarse_texel_m: float = 0.124,
+                 bump_slope: tuple[float, float, float, float] = BUMP_SLOPE) -> None:
         self.scene = scene
         caster = getattr(scene, "_caster", None)
         self.caster: RayCaster = caster if caster is not None else RayCaster(scene.vertices, scene.faces)
@@ -1275,6 +1306,9 @@ class SpectralRenderer:
         self.sens = camera_sensitivities(sensitivity)  # (Λ, 3)
         self.texture = _MipTexture(scene.config.texture_size, scene.config.seed) if texture else None
         self.fine_texel_m = fine_texel_m
+        self.bump_slope = np.asarray(bump_slope, dtype=np.float64) if texture else np.zeros(4)
+        if self.bump_slope.shape != (4,) or np.any(self.bump_slope < 0):
+            raise ValueError(f"bump_slope must be 4 slopes >= 0 (ground, rock, trunk, foliage), got {bump_slope}")
         self.coarse_texel_m = coarse_texel_m
         fn = self.caster.face_normals
         self._face_normals = fn.astype(np.float32)
@@ -1370,7 +1404,7 @@ class SpectralRenderer:
                               tex.flat if tex else self._no_tex, tex.offsets if tex else self._no_off,
                               tex.size if tex else 1, tex.n_levels if tex else 1, self.textured,
                               1.0 / self.fine_texel_m, 1.0 / self.coarse_texel_m, float(camera.fx),
-                              p[sl], ng[sl], n[sl], vv[sl], W[sl])
+                              self.bump_slope, p[sl], ng[sl], n[sl], vv[sl], W[sl])
 
             step = -(-nh // self._threads)
             slices = [slice(k, min(k + step, nh)) for k in range(0, nh, step)]

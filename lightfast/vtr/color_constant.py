@@ -79,6 +79,7 @@ leaves few features; use ``"percentile"`` (or a lower ``sift_contrast_threshold`
 """
 from __future__ import annotations
 
+import functools
 import logging
 import math
 from dataclasses import dataclass
@@ -343,6 +344,9 @@ def image_sources(
     unknown = [s for s in sources if s not in SOURCES]
     if unknown:
         raise VtrInputError(f"unknown image source(s) {unknown}; known: {list(SOURCES)}")
+    a = _check_rgb(rgb)
+    if a.dtype == np.uint8 and cfg.normalization == "fixed":
+        return _image_sources_uint8(a, cfg, tuple(sources))
     out: dict[str, SourceImage] = {}
     for name in sources:
         if name == "grey":
@@ -353,3 +357,46 @@ def image_sources(
             cc = color_constant(rgb, alpha, beta, cfg)
             out[name] = SourceImage(name, to_uint8(cc, cfg), cc.valid)
     return out
+
+
+@functools.lru_cache(maxsize=32)
+def _source_tables(name: str, cfg: ColorConstantConfig) -> tuple[NDArray[np.float32], NDArray[np.float32],
+                                                                NDArray[np.float32], int]:
+    """Per-channel float32 tables (for G, B, R levels) whose sum is the fixed 8-bit mapping of F before clipping
+    and truncation, (F − lo)·255/(hi − lo) + 0.5, and the 8-bit value of the invalid-pixel fill."""
+    alpha, beta = source_weights(name, cfg)
+    lo, hi = fixed_range(alpha, beta, cfg)
+    scale = 255.0 / (hi - lo)
+    log_level = np.log(np.clip(np.arange(256, dtype=np.float64), cfg.min_valid, cfg.saturation_level))
+    t_g = ((log_level - lo) * scale + 0.5).astype(np.float32)
+    t_b = (-alpha * scale * log_level).astype(np.float32)
+    t_r = (-beta * scale * log_level).astype(np.float32)
+    fill = int(np.clip((_fill_value(alpha, beta, cfg) - lo) * scale + 0.5, 0.0, 255.0))
+    return t_g, t_b, t_r, fill
+
+
+def _image_sources_uint8(rgb: NDArray[np.uint8], cfg: ColorConstantConfig, sources: tuple[str, ...]
+                         ) -> dict[str, SourceImage]:
+    """:func:`image_sources` for rgb8 input and the fixed mapping, by table lookups: the channels are split once,
+    the validity mask (it does not depend on α, β) is computed once, and each colour-constant source is the sum of
+    three per-channel tables (:func:`_source_tables`) — the same mapping as :func:`to_uint8` of
+    :func:`color_constant` (up to float rounding: at most one level, on values at a rounding boundary)."""
+    out: dict[str, SourceImage] = {}
+    red, green, blue = cv2.split(np.ascontiguousarray(rgb))
+    valid: NDArray[np.bool_] | None = None
+    for name in sources:
+        if name == "grey":
+            grey = greyscale(rgb, cfg)
+            out[name] = SourceImage(name, grey, np.ones(grey.shape, dtype=bool))
+            continue
+        if valid is None:
+            levels = np.arange(256, dtype=np.float64)
+            ok = ((levels >= cfg.min_valid) & (levels < cfg.saturation_level)).astype(np.uint8)
+            valid = (cv2.LUT(red, ok) & cv2.LUT(green, ok) & cv2.LUT(blue, ok)).astype(bool)
+        t_g, t_b, t_r, fill = _source_tables(name, cfg)
+        f = cv2.add(cv2.add(cv2.LUT(green, t_g), cv2.LUT(blue, t_b)), cv2.LUT(red, t_r))
+        image = np.clip(f, 0.0, 255.0, out=f).astype(np.uint8)
+        image[~valid] = fill
+        out[name] = SourceImage(name, image, valid)
+    return out
+

@@ -68,6 +68,7 @@ from lightfast.vtr.visual_odometry import (
     StereoCamera,
     VisualOdometry,
     VisualOdometryConfig,
+    VoResult,
     estimate_pose_stereo,
     match_landmarks,
     max_descriptor_distance,
@@ -398,23 +399,34 @@ class RepeatPipeline:
 
     def step(self, stamp_ns: int, left_rgb: NDArray[np.generic], right_rgb: NDArray[np.generic],
              P_left: ArrayLike, P_right: ArrayLike) -> RepeatResult:
-        """Process one rectified rgb8 stereo pair with its ``camera_info`` projection matrices."""
+        """Process one rectified rgb8 stereo pair with its ``camera_info`` projection matrices.
+
+        With front-end threads (``workers > 1``) the greyscale VO runs while the colour-constant features are
+        still being detected; the result is the same as :meth:`step_features` on the finished features."""
         t0 = time.perf_counter()
         Pl, Pr = check_stereo_pair(P_left, P_right)
-        features = dict(self.front.process(left_rgb, right_rgb, Pl, Pr, self.localizer.first_sources))
-        front_s = time.perf_counter() - t0
-        extra = {"front_end_extra": 0.0}
+        features = self.front.submit(left_rgb, right_rgb, Pl, Pr, self.localizer.first_sources)
+        grey = features["grey"]
+        submit_s = time.perf_counter() - t0 - features.seconds
 
         def more() -> Mapping[str, StereoFeatures]:
             rest = tuple(s for s in self.localizer.sources if s not in features)
             if rest:
                 t = time.perf_counter()
-                features.update(self.front.process(left_rgb, right_rgb, Pl, Pr, rest))
-                extra["front_end_extra"] += time.perf_counter() - t
+                features.update(self.front.submit(left_rgb, right_rgb, Pl, Pr, rest))
+                features.seconds += time.perf_counter() - t
             return features
 
-        result = self.step_features(stamp_ns, features, Pl, Pr, more=more)
-        timing = {"front_end": front_s + extra["front_end_extra"], **result.timing_s}
+        camera = StereoCamera.from_projections(Pl, Pr)
+        t = time.perf_counter()
+        vo = self.vo.process(grey, camera)
+        vo_s = time.perf_counter() - t
+        front_before = features.seconds
+        result = self._localize_step(stamp_ns, vo, features, camera, more)
+        # the time spent finishing features during localization belongs to the front end
+        timing = {"front_end": submit_s + features.seconds, "vo": vo_s,
+                  **{k: v - (features.seconds - front_before if k == "localization" else 0.0)
+                     for k, v in result.timing_s.items()}}
         return _with_timing(result, timing)
 
     def step_features(self, stamp_ns: int, features: Mapping[str, StereoFeatures], P_left: ArrayLike,
@@ -424,12 +436,18 @@ class RepeatPipeline:
         if "grey" not in features:
             raise VtrInputError("greyscale features are needed (VO runs on greyscale)")
         camera = StereoCamera.from_projections(P_left, P_right)
+        t = time.perf_counter()
+        vo = self.vo.process(features["grey"], camera)
+        vo_s = time.perf_counter() - t
+        result = self._localize_step(stamp_ns, vo, features, camera, more)
+        return _with_timing(result, {"vo": vo_s, **result.timing_s})
+
+    def _localize_step(self, stamp_ns: int, vo: VoResult, features: Mapping[str, StereoFeatures],
+                       camera: StereoCamera, more: FeatureSupplier | None) -> RepeatResult:
+        """Steps 3–5 of the module docstring after the VO step ``vo``."""
         c = self.config
         self.frames += 1
         timing: dict[str, float] = {}
-        t = time.perf_counter()
-        vo = self.vo.process(features["grey"], camera)
-        timing["vo"] = time.perf_counter() - t
         motion = vo.T_prev_cur
         step_m = 0.0 if vo.first else float(np.linalg.norm(motion[:3, 3]))
 

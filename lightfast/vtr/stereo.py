@@ -56,6 +56,7 @@ outside [``min_depth_m``, ``max_depth_m``] or whose refined disparity left the a
 from __future__ import annotations
 
 import logging
+import math
 from dataclasses import dataclass
 from typing import Final
 
@@ -272,9 +273,14 @@ def descriptor_distances(a: NDArray[np.generic], b: NDArray[np.generic], kind: s
 def pair_distances(
     a: NDArray[np.generic], b: NDArray[np.generic], ia: NDArray[np.intp], ib: NDArray[np.intp], kind: str
 ) -> NDArray[np.float32]:
-    """Descriptor distances of the pairs (a[ia[k]], b[ib[k]]) only (Hamming by a popcount table, or Euclidean)."""
+    """Descriptor distances of the pairs (a[ia[k]], b[ib[k]]) only (Hamming by XOR and popcount of 64-bit words,
+    or Euclidean)."""
     if kind == "orb":
         _check_orb(a, b)
+        if a.shape[1] % 8 == 0:
+            wa = np.ascontiguousarray(a).view(np.uint64)
+            wb = np.ascontiguousarray(b).view(np.uint64)
+            return np.bitwise_count(wa[ia] ^ wb[ib]).sum(axis=1, dtype=np.uint16).astype(np.float32)
         return _POPCOUNT[np.bitwise_xor(a[ia], b[ib])].sum(axis=1)
     if kind == "sift":
         diff = a[ia].astype(np.float32, copy=False) - b[ib].astype(np.float32, copy=False)
@@ -287,17 +293,25 @@ def _check_orb(a: NDArray[np.generic], b: NDArray[np.generic]) -> None:
         raise VtrInputError("ORB descriptors must be packed uint8 bits")
 
 
-def _first_per_group(keys: NDArray[np.intp]) -> NDArray[np.bool_]:
-    return np.r_[True, keys[1:] != keys[:-1]] if keys.size else np.zeros(0, bool)
-
-
 def _select_matches(
     ia: NDArray[np.intp], ib: NDArray[np.intp], d: NDArray[np.float32], m: int, ratio: float, mutual: bool
 ) -> tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.float32]]:
-    """Nearest neighbour + ratio test + mutual check over candidate pairs (ia, ib, d), vectorized by sorting."""
-    order = np.lexsort((d, ia))  # by a-index, then distance
+    """Nearest neighbour + ratio test + mutual check over candidate pairs (ia, ib, d), vectorized by sorting
+    single int64 keys: (a-index, distance) for the nearest and second-nearest neighbour of every a, (b-index,
+    distance, a-index) for the nearest a of every b (ties: the smallest a-index). Distances enter the keys as
+    integers: Hamming distances as they are, others by their rank."""
+    if ia.size == 0:
+        return ia.astype(np.intp), ib.astype(np.intp), d.astype(np.float32)
+    dk = d.astype(np.int64)
+    if not np.array_equal(dk, d):  # non-integer distances (SIFT): their ranks keep the order and the ties
+        _, dk = np.unique(d, return_inverse=True)
+        dk = dk.astype(np.int64).reshape(-1)
+    big = int(dk.max()) + 2
+    na = int(ia.max()) + 1
+    ia64, ib64 = ia.astype(np.int64), ib.astype(np.int64)
+    order = np.argsort(ia64 * big + dk)
     ia_s, ib_s, d_s = ia[order], ib[order], d[order]
-    first = np.flatnonzero(_first_per_group(ia_s))
+    first = np.flatnonzero(np.r_[True, ia_s[1:] != ia_s[:-1]])
     nxt = first + 1
     has_second = nxt < ia_s.size
     has_second[has_second] = ia_s[nxt[has_second]] == ia_s[first[has_second]]
@@ -306,8 +320,12 @@ def _select_matches(
     i, j, d1 = ia_s[first], ib_s[first], d_s[first]
     keep = d1 < np.float32(ratio) * d2  # no second candidate: passes; ties fail
     if mutual:
-        order_b = np.lexsort((ia, d, ib))  # by b-index, then distance, then a-index
-        firsts_b = order_b[_first_per_group(ib[order_b])]
+        if float(m) * big * na < 2.0**62:
+            order_b = np.argsort((ib64 * big + dk) * na + ia64)
+        else:  # keys would overflow int64
+            order_b = np.lexsort((ia, dk, ib))
+        ib_b = ib[order_b]
+        firsts_b = order_b[np.r_[True, ib_b[1:] != ib_b[:-1]]]
         best_a_of_b = np.full(m, -1, np.intp)
         best_a_of_b[ib[firsts_b]] = ia[firsts_b]
         keep &= best_a_of_b[j] == i
@@ -322,13 +340,20 @@ def match_descriptors(
     ratio: float = 0.8,
     mutual: bool = True,
     candidates: tuple[NDArray[np.intp], NDArray[np.intp]] | None = None,
+    max_distance: float = math.inf,
 ) -> tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.float32]]:
     """Nearest-neighbour matches from descriptor set ``a`` (N, D) to ``b`` (M, D).
 
     Only the ``candidates`` pairs (index arrays into ``a`` and ``b``; default: all N·M pairs, by one matrix
     product) are considered. A match (i, j) is kept when its distance is below ``ratio`` times the second-nearest
-    candidate distance of i (no second candidate: passes) and, with ``mutual``, when i is also j's nearest
-    candidate. Returns indices into ``a`` and ``b`` and the distances, ordered by i.
+    candidate distance of i (no second candidate: passes), with ``mutual`` when i is also j's nearest candidate,
+    and when its distance is at most ``max_distance``. Returns indices into ``a`` and ``b`` and the distances,
+    ordered by i.
+
+    With candidates and a finite ``max_distance``, pairs farther than ``max_distance / ratio`` are dropped before
+    the selection; the result is the same (such a pair can neither be a kept match nor decide one: as a second
+    nearest it passes the ratio test of any kept match, and a j whose nearest i is that far has no kept match),
+    but the sorting handles far fewer pairs (most candidate pairs of guided matching are unrelated features).
     """
     n, m = len(a), len(b)
     if n == 0 or m == 0:
@@ -345,13 +370,20 @@ def match_descriptors(
             keep &= d1 < np.float32(ratio) * np.partition(d, 1, axis=1)[:, 1]
         if mutual:
             keep &= np.argmin(d, axis=0)[best] == rows
+        keep &= d1 <= max_distance
         return rows[keep], best[keep], d1[keep]
     ia, ib = (np.asarray(c, dtype=np.intp) for c in candidates)
     if ia.shape != ib.shape or ia.ndim != 1:
         raise VtrInputError("candidates must be two index arrays of the same length")
     if ia.size and (ia.min() < 0 or ia.max() >= n or ib.min() < 0 or ib.max() >= m):
         raise VtrInputError("candidate indices out of range")
-    return _select_matches(ia, ib, pair_distances(a, b, ia, ib, kind), m, ratio, mutual)
+    d = pair_distances(a, b, ia, ib, kind)
+    if math.isfinite(max_distance) and ratio > 0.0:
+        near = d <= max_distance / ratio
+        ia, ib, d = ia[near], ib[near], d[near]
+    i, j, d1 = _select_matches(ia, ib, d, m, ratio, mutual)
+    keep = d1 <= max_distance
+    return i[keep], j[keep], d1[keep]
 
 
 def stereo_candidates(
@@ -384,19 +416,23 @@ def match_stereo(
     if left.kind != right.kind:
         raise VtrInputError(f"cannot match {left.kind} features with {right.kind} features")
     candidates = stereo_candidates(left.uv, right.uv, c)
-    il, ir, dist = match_descriptors(
-        left.descriptors, right.descriptors, left.kind, ratio=c.ratio, mutual=c.mutual, candidates=candidates
+    return match_descriptors(
+        left.descriptors, right.descriptors, left.kind, ratio=c.ratio, mutual=c.mutual, candidates=candidates,
+        max_distance=c.orb_max_distance if left.kind == "orb" else c.sift_max_distance,
     )
-    keep = dist <= (c.orb_max_distance if left.kind == "orb" else c.sift_max_distance)
-    return il[keep], ir[keep], dist[keep]
 
 
-def _sample_rows(img: NDArray[np.float32], v: NDArray[np.intp], u: NDArray[np.float64]) -> NDArray[np.float32]:
-    """Linear interpolation of ``img`` along rows at integer rows ``v`` and real columns ``u`` (same shapes)."""
-    w = img.shape[1]
-    u0 = np.clip(np.floor(u).astype(np.intp), 0, w - 2)
-    f = (u - u0).astype(np.float32)
-    return img[v, u0] * (1.0 - f) + img[v, u0 + 1] * f
+def _lerp_columns(strip: NDArray[np.float32], idx: NDArray[np.intp], f: NDArray[np.float32]) -> NDArray[np.float32]:
+    """Linear interpolation along the last axis of ``strip`` (N, P, S) at columns ``idx + f`` (idx: (N, 1, Q)
+    integer start columns, f: (N, 1, 1) fractions), (N, P, Q)."""
+    n, p, width = strip.shape
+    flat = (np.arange(n * p, dtype=np.intp) * width).reshape(n, p, 1) + idx  # (N, P, Q) indices into the ravel
+    a = np.take(strip, flat)
+    b = np.take(strip, flat + 1)
+    b -= a
+    b *= f
+    a += b
+    return a
 
 
 def refine_disparity(
@@ -431,16 +467,21 @@ def refine_disparity(
         (v0 - radius >= 0) & (v0 + radius < h) & (u0 - radius >= 0) & (u0 + radius < w)
         & (u0 - d0 - search - radius - 1 >= 0) & (u0 - d0 + search + radius + 1 < w)
     )
-    L = left.astype(np.float32)
-    R = right.astype(np.float32)
-    vv = np.clip(v0[:, None, None] + offs[None, :, None], 0, h - 1)  # (N, P, 1)
-    uu = np.clip(u0[:, None, None] + offs[None, None, :], 0, w - 1)  # (N, 1, P)
-    lp = L[vv, uu]  # (N, P, P)
-    lp = lp - lp.mean(axis=(1, 2), keepdims=True)
-    ur = np.clip((u0 - d0)[:, None, None, None] - ks[None, :, None, None] + offs[None, None, None, :], 0, w - 1)
-    rp = R[vv[:, None, :, :], ur]  # (N, K, P, P)
-    rp = rp - rp.mean(axis=(2, 3), keepdims=True)
-    cost = ((rp - lp[:, None]) ** 2).sum(axis=(2, 3))  # (N, K)
+    # Everything is read from two small gathers (no whole-image conversions): the left patch (N, P, P) and a strip
+    # of the right image around round(d) on the same rows, (N, P, S), wide enough for the block matching over ks
+    # and the Gauss-Newton steps (the local column of right column u0 - d + o is m0 + o - (d - d0)).
+    m0 = search + radius + 3
+    width = 2 * m0 + 1
+    rows_v = np.clip(v0[:, None] + offs[None, :], 0, h - 1) * w  # (N, P) flat row offsets
+    lp = left.reshape(-1)[rows_v[:, :, None] + np.clip(u0[:, None, None] + offs, 0, w - 1)].astype(np.float32)
+    lp -= lp.mean(axis=(1, 2), keepdims=True)
+    cols = np.clip((u0 - d0 - m0)[:, None] + np.arange(width)[None, :], 0, w - 1)  # (N, S)
+    strip = right.reshape(-1)[rows_v[:, :, None] + cols[:, None, :]].astype(np.float32)  # (N, P, S)
+    # block matching: right column u0 - (d0 + k) + o has the local column m0 - k + o
+    rp = np.stack([strip[:, :, m0 - k - radius:m0 - k + radius + 1] for k in ks], axis=1)  # (N, K, P, P)
+    rp -= rp.mean(axis=(2, 3), keepdims=True)
+    rp -= lp[:, None]
+    cost = np.einsum("nkij,nkij->nk", rp, rp)  # (N, K) zero-mean SSD
     kbest = np.argmin(cost, axis=1)
     interior = (kbest > 0) & (kbest < ks.size - 1)
     kc = np.clip(kbest, 1, ks.size - 2)
@@ -450,19 +491,21 @@ def refine_disparity(
     ok = inside & interior & (denom > 1e-6)
     d = (d0 + ks[kc]).astype(np.float64) + np.where(ok, 0.5 * (cm - cp) / np.where(ok, denom, 1.0), 0.0)
     d_start = d.copy()
-    gx = np.zeros_like(R)
-    gx[:, 1:-1] = 0.5 * (R[:, 2:] - R[:, :-2])
-    vb = np.broadcast_to(vv, (n, offs.size, offs.size))
+    # central-difference gradient of the strip (linear interpolation of it = difference of interpolated neighbours)
+    grad = np.zeros_like(strip)
+    grad[:, :, 1:-1] = 0.5 * (strip[:, :, 2:] - strip[:, :, :-2])
     for _ in range(iterations):
-        ucol = (u0[:, None, None] + offs[None, None, :]) - d[:, None, None]  # right columns, (N, 1, P)
-        ucol = np.broadcast_to(ucol, (n, offs.size, offs.size))
-        rs = _sample_rows(R, vb, ucol)
-        gs = _sample_rows(gx, vb, ucol)
-        rs = rs - rs.mean(axis=(1, 2), keepdims=True)
-        gs = gs - gs.mean(axis=(1, 2), keepdims=True)
+        x = m0 - radius - (d - d0)  # local column of the patch's first pixel, per match
+        i0 = np.clip(np.floor(x).astype(np.intp), 0, width - 2 * radius - 2)
+        f = (x - i0).astype(np.float32)[:, None, None]
+        idx = (i0[:, None] + np.arange(2 * radius + 1)[None, :])[:, None, :]  # (N, 1, P)
+        rs = _lerp_columns(strip, idx, f)
+        gs = _lerp_columns(grad, idx, f)
+        rs -= rs.mean(axis=(1, 2), keepdims=True)
+        gs -= gs.mean(axis=(1, 2), keepdims=True)
         r = rs - lp  # residual; d(r)/d(d) = -gx
-        hess = (gs * gs).sum(axis=(1, 2))
-        step = np.where(hess > 1e-6, (gs * r).sum(axis=(1, 2)) / np.maximum(hess, 1e-6), 0.0)
+        hess = np.einsum("nij,nij->n", gs, gs)
+        step = np.where(hess > 1e-6, np.einsum("nij,nij->n", gs, r) / np.maximum(hess, 1e-6), 0.0)
         d = np.where(ok, d + step, d)
     ok &= np.abs(d - d_start) <= 1.0
     out = np.where(ok, d, disparity).astype(np.float32)
@@ -479,10 +522,14 @@ def check_projection(P: ArrayLike, name: str = "P") -> NDArray[np.float64]:
     m = np.asarray(P, dtype=np.float64)
     if m.size == 12:
         m = m.reshape(3, 4)
-    if m.shape != (3, 4) or not np.all(np.isfinite(m)):
+    if m.shape != (3, 4):
         raise VtrInputError(f"{name} must be a finite 3x4 projection matrix, got shape {np.shape(P)}")
-    if not np.allclose(m[2], [0.0, 0.0, 1.0, 0.0]) or m[0, 1] != 0.0 or m[1, 0] != 0.0 or m[0, 0] <= 0.0 \
-            or m[1, 1] <= 0.0:
+    v = m.tolist()  # plain floats: these checks run several times per frame
+    if not all(math.isfinite(x) for row in v for x in row):
+        raise VtrInputError(f"{name} must be a finite 3x4 projection matrix, got non-finite values")
+    if not all(math.isclose(a, b, rel_tol=1e-5, abs_tol=1e-8) for a, b in zip(v[2], (0.0, 0.0, 1.0, 0.0),
+                                                                             strict=True)) \
+            or v[0][1] != 0.0 or v[1][0] != 0.0 or v[0][0] <= 0.0 or v[1][1] <= 0.0:
         raise VtrInputError(f"{name} is not a rectified projection matrix [fx 0 cx Tx; 0 fy cy Ty; 0 0 1 0]: {m}")
     return m
 
@@ -492,11 +539,10 @@ def check_stereo_pair(P_left: ArrayLike, P_right: ArrayLike) -> tuple[NDArray[np
     fx, fy, cy and Ty (rows align), different Tx (a baseline). Raises VtrInputError."""
     Pl, Pr = check_projection(P_left, "P_left"), check_projection(P_right, "P_right")
     for (r, c), what in (((0, 0), "fx"), ((1, 1), "fy"), ((1, 2), "cy"), ((1, 3), "Ty")):
-        if not np.isclose(Pl[r, c], Pr[r, c], rtol=1e-6, atol=1e-9):
-            raise VtrInputError(
-                f"P_left and P_right are not a rectified pair: {what} differs ({Pl[r, c]} vs {Pr[r, c]})"
-            )
-    if np.isclose(Pl[0, 3], Pr[0, 3], rtol=0.0, atol=1e-12):
+        a, b = float(Pl[r, c]), float(Pr[r, c])
+        if abs(a - b) > 1e-9 + 1e-6 * abs(b):  # np.isclose(a, b, rtol=1e-6, atol=1e-9)
+            raise VtrInputError(f"P_left and P_right are not a rectified pair: {what} differs ({a} vs {b})")
+    if abs(float(Pl[0, 3]) - float(Pr[0, 3])) <= 1e-12:
         raise VtrInputError("P_left and P_right have the same Tx: no stereo baseline")
     return Pl, Pr
 
@@ -513,7 +559,12 @@ def triangulate(
     (Tx_l/f, Ty/fy, 0), which leaves X_left = (u_l − cx_l) Z/f, Y_left = (v_l − cy) Z/fy. Rows whose effective
     disparity has the wrong sign or is zero (points at or beyond infinity) are NaN.
     """
-    Pl, Pr = check_stereo_pair(P_left, P_right)
+    return _triangulate(*check_stereo_pair(P_left, P_right), uv_left, uv_right)
+
+
+def _triangulate(Pl: NDArray[np.float64], Pr: NDArray[np.float64], uv_left: ArrayLike, uv_right: ArrayLike
+                 ) -> NDArray[np.float64]:
+    """:func:`triangulate` with checked projection matrices."""
     a = np.asarray(uv_left, dtype=np.float64).reshape(-1, 2)
     b = np.asarray(uv_right, dtype=np.float64).reshape(-1, 2)
     if a.shape != b.shape:
@@ -549,12 +600,21 @@ class StereoFrontEnd:
     def source_features(self, left: SourceImage, right: SourceImage, P_left: ArrayLike, P_right: ArrayLike
                         ) -> StereoFeatures:
         """Detect, match left to right, refine and triangulate one image source."""
-        c = self.config
         if left.image.shape != right.image.shape:
             raise VtrInputError(f"left image {left.image.shape} and right image {right.image.shape} differ in size")
         Pl, Pr = check_stereo_pair(P_left, P_right)
         fl = self.extractor.detect(left.image, left.valid)
         fr = self.extractor.detect(right.image, right.valid)
+        return self.landmarks(left, right, fl, fr, Pl, Pr)
+
+    def landmarks(self, left: SourceImage, right: SourceImage, fl: Features, fr: Features, P_left: ArrayLike,
+                  P_right: ArrayLike) -> StereoFeatures:
+        """:meth:`source_features` after the detection: match the left and right features ``fl``, ``fr`` of one
+        image source, refine and triangulate."""
+        c = self.config
+        if left.image.shape != right.image.shape:
+            raise VtrInputError(f"left image {left.image.shape} and right image {right.image.shape} differ in size")
+        Pl, Pr = check_stereo_pair(P_left, P_right)
         il, ir, dist = match_stereo(fl, fr, c)
         uvl, uvr = fl.uv[il], fr.uv[ir]
         disp = (uvl[:, 0] - uvr[:, 0]).astype(np.float32)
@@ -565,7 +625,7 @@ class StereoFrontEnd:
             uvr = np.stack([uvl[:, 0] - disp, uvr[:, 1]], axis=1).astype(np.float32)
         else:
             refined = np.ones(len(il), bool)
-        pts = triangulate(Pl, Pr, uvl, uvr)
+        pts = _triangulate(Pl, Pr, uvl, uvr)
         with np.errstate(invalid="ignore"):
             ok = (
                 np.all(np.isfinite(pts), axis=1) & (pts[:, 2] >= c.min_depth_m) & (pts[:, 2] <= c.max_depth_m)

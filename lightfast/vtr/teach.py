@@ -23,10 +23,12 @@ When VO fails during the teach, the constant-velocity prediction is chained (and
 """
 from __future__ import annotations
 
+import functools
 import logging
 import math
 import os
-from collections.abc import Mapping
+import time
+from collections.abc import Callable, Iterator, Mapping
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
@@ -38,10 +40,11 @@ from lightfast.config import Config, ConfigError, param
 from lightfast.vtr.color_constant import SOURCES, ColorConstantConfig, image_sources
 from lightfast.vtr.errors import VtrError, VtrInputError
 from lightfast.vtr.map_store import Landmarks, MapExistsError, MapStore, MapWriter, TeachMap
-from lightfast.vtr.stereo import StereoConfig, StereoFeatures, StereoFrontEnd, check_stereo_pair
+from lightfast.vtr.stereo import FeatureExtractor, StereoConfig, StereoFeatures, StereoFrontEnd, check_stereo_pair
 from lightfast.vtr.visual_odometry import StereoCamera, VisualOdometry, VisualOdometryConfig
 
 __all__ = [
+    "PendingFeatures",
     "SourceFrontEnd",
     "TeachConfig",
     "TeachPipeline",
@@ -85,8 +88,15 @@ def rotation_deg(T: NDArray[np.float64]) -> float:
 
 class SourceFrontEnd:
     """The per-source stereo front end of Fig. 4 for both pipelines: one
-    :class:`~lightfast.vtr.stereo.StereoFrontEnd` per image source, so the sources can run in parallel threads
-    (OpenCV's feature extraction releases the GIL) and be computed on demand (:meth:`process` with a subset)."""
+    :class:`~lightfast.vtr.stereo.StereoFrontEnd` per image source, computed on demand (:meth:`process` with a
+    subset of the sources).
+
+    With ``workers > 1`` a thread pool runs the six feature detections of a three-source stereo frame (OpenCV's
+    detection releases the GIL; each (source, side) has its own detector object) and the image sources of the left
+    and right image, while the calling thread matches, refines and triangulates every source as soon as its two
+    detections are done. :meth:`submit` returns at once with a :class:`PendingFeatures` mapping that finishes a
+    source when it is first read, so a caller can start work on the greyscale landmarks (VO) while the colour-
+    constant ones are still being detected."""
 
     def __init__(self, sources: tuple[str, ...], stereo: StereoConfig | None = None,
                  color: ColorConstantConfig | None = None, workers: int = 1) -> None:
@@ -95,6 +105,8 @@ class SourceFrontEnd:
         self.color = color or ColorConstantConfig()
         self._fronts = {s: StereoFrontEnd(self.stereo, self.color, sources=(s,)) for s in self.sources}
         self._pool = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="vtr-front") if workers > 1 else None
+        # a second detector per source, so that the left and right detections can run concurrently
+        self._right = {s: FeatureExtractor(self.stereo) for s in self.sources} if self._pool is not None else {}
 
     @property
     def kind(self) -> str:
@@ -105,27 +117,77 @@ class SourceFrontEnd:
             self._pool.shutdown(wait=True)
             self._pool = None
 
-    def process(self, left_rgb: NDArray[np.generic], right_rgb: NDArray[np.generic], P_left: ArrayLike,
-                P_right: ArrayLike, sources: tuple[str, ...] | None = None) -> dict[str, StereoFeatures]:
-        """Landmarks of ``sources`` (default: all configured) for one rectified rgb stereo pair."""
+    def _wanted(self, sources: tuple[str, ...] | None) -> tuple[str, ...]:
         wanted = self.sources if sources is None else tuple(sources)
         unknown = [s for s in wanted if s not in self._fronts]
         if unknown:
             raise VtrInputError(f"image source(s) {unknown} not configured (have {list(self.sources)})")
+        return wanted
+
+    def process(self, left_rgb: NDArray[np.generic], right_rgb: NDArray[np.generic], P_left: ArrayLike,
+                P_right: ArrayLike, sources: tuple[str, ...] | None = None) -> dict[str, StereoFeatures]:
+        """Landmarks of ``sources`` (default: all configured) for one rectified rgb stereo pair."""
+        return dict(self.submit(left_rgb, right_rgb, P_left, P_right, sources))
+
+    def submit(self, left_rgb: NDArray[np.generic], right_rgb: NDArray[np.generic], P_left: ArrayLike,
+               P_right: ArrayLike, sources: tuple[str, ...] | None = None) -> PendingFeatures:
+        """Start the front end of ``sources`` (default: all) on one rectified rgb stereo pair; the landmarks of a
+        source are finished in the calling thread when first read from the returned mapping. Without a thread pool
+        everything is computed here."""
+        wanted = self._wanted(sources)
         left, right = np.asarray(left_rgb), np.asarray(right_rgb)
         if left.shape != right.shape:
             raise VtrInputError(f"left image {left.shape} and right image {right.shape} differ in size")
         Pl, Pr = check_stereo_pair(P_left, P_right)
+        pool = self._pool
+        if pool is None or not wanted:
+            ls, rs = image_sources(left, self.color, wanted), image_sources(right, self.color, wanted)
+            return PendingFeatures({s: self._fronts[s].source_features(ls[s], rs[s], Pl, Pr) for s in wanted})
+        images = [pool.submit(image_sources, im, self.color, wanted) for im in (left, right)]
+        ls, rs = images[0].result(), images[1].result()
+        detections = {s: (pool.submit(self._fronts[s].extractor.detect, ls[s].image, ls[s].valid),
+                          pool.submit(self._right[s].detect, rs[s].image, rs[s].valid)) for s in wanted}
 
-        def one(s: str) -> StereoFeatures:
-            ls = image_sources(left, self.color, (s,))[s]
-            rs = image_sources(right, self.color, (s,))[s]
-            return self._fronts[s].source_features(ls, rs, Pl, Pr)
+        def finish(s: str) -> StereoFeatures:
+            fl, fr = (f.result() for f in detections[s])
+            return self._fronts[s].landmarks(ls[s], rs[s], fl, fr, Pl, Pr)
 
-        if self._pool is None or len(wanted) < 2:
-            return {s: one(s) for s in wanted}
-        futures = {s: self._pool.submit(one, s) for s in wanted}
-        return {s: f.result() for s, f in futures.items()}
+        return PendingFeatures({}, {s: functools.partial(finish, s) for s in wanted})
+
+
+class PendingFeatures(Mapping[str, StereoFeatures]):
+    """Landmarks per image source, each finished (by a callable) when first read; ``seconds`` is the time spent
+    finishing them (waiting for detections, matching, triangulation). Not thread-safe."""
+
+    def __init__(self, done: Mapping[str, StereoFeatures],
+                 pending: Mapping[str, Callable[[], StereoFeatures]] | None = None) -> None:
+        self._done = dict(done)
+        self._pending = dict(pending or {})
+        self.seconds = 0.0
+
+    def __getitem__(self, source: str) -> StereoFeatures:
+        if source not in self._done:
+            finish = self._pending.pop(source)  # KeyError for an unknown source, as a dict
+            t0 = time.perf_counter()
+            self._done[source] = finish()
+            self.seconds += time.perf_counter() - t0
+        return self._done[source]
+
+    def __contains__(self, source: object) -> bool:
+        return source in self._done or source in self._pending
+
+    def __iter__(self) -> Iterator[str]:
+        return iter([*self._done, *self._pending])
+
+    def __len__(self) -> int:
+        return len(self._done) + len(self._pending)
+
+    def update(self, other: PendingFeatures) -> None:
+        """Add the (pending) sources of another submission."""
+        for s in other._done:
+            self._done[s] = other._done[s]
+        self._pending.update(other._pending)
+        self.seconds += other.seconds
 
 
 @dataclass(frozen=True)

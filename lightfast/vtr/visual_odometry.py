@@ -46,7 +46,7 @@ from scipy.spatial import cKDTree
 
 from lightfast.config import Config, param
 from lightfast.vtr.errors import VtrInputError
-from lightfast.vtr.stereo import StereoFeatures, check_stereo_pair, match_descriptors, pair_distances
+from lightfast.vtr.stereo import StereoFeatures, check_stereo_pair, match_descriptors
 
 __all__ = [
     "PoseEstimate",
@@ -235,20 +235,24 @@ def _normal_equations(
     """JᵀJ and Jᵀr of the stereo residuals for the left perturbation T_cur_ref ← exp(δ) T_cur_ref, δ = (ρ, φ)."""
     X, Y, Z = p[:, 0], p[:, 1], p[:, 2]
     iz = 1.0 / Z
-    iz2 = iz * iz
+    x, y = X * iz, Y * iz
+    fx, fy = K[0, 0], K[1, 1]
     n = p.shape[0]
-    Jp = np.zeros((n, 3, 3))
-    Jp[:, 0, 0] = K[0, 0] * iz
-    Jp[:, 0, 2] = -K[0, 0] * X * iz2
-    Jp[:, 1, 1] = K[1, 1] * iz
-    Jp[:, 1, 2] = -K[1, 1] * Y * iz2
-    Jp[:, 2, 2] = -fb * iz2
-    # dp/dδ = [I | -hat(p)]
-    minus_hat = np.zeros((n, 3, 3))
-    minus_hat[:, 0, 1], minus_hat[:, 0, 2] = Z, -Y
-    minus_hat[:, 1, 0], minus_hat[:, 1, 2] = -Z, X
-    minus_hat[:, 2, 0], minus_hat[:, 2, 1] = Y, -X
-    J = np.concatenate([Jp, Jp @ minus_hat], axis=2)  # (n, 3, 6)
+    # J = ∂(u, v, d)/∂p · [I | −hat(p)] in closed form, rows (u, v, d) of every point stacked: (3n, 6)
+    J = np.zeros((n, 3, 6))
+    J[:, 0, 0] = fx * iz
+    J[:, 0, 2] = -fx * x * iz
+    J[:, 0, 3] = -fx * x * y
+    J[:, 0, 4] = fx * (1.0 + x * x)
+    J[:, 0, 5] = -fx * y
+    J[:, 1, 1] = fy * iz
+    J[:, 1, 2] = -fy * y * iz
+    J[:, 1, 3] = -fy * (1.0 + y * y)
+    J[:, 1, 4] = fy * x * y
+    J[:, 1, 5] = fy * x
+    J[:, 2, 2] = -fb * iz * iz
+    J[:, 2, 3] = -fb * y * iz
+    J[:, 2, 4] = fb * x * iz
     Jf = J.reshape(-1, 6)
     return Jf.T @ Jf, Jf.T @ r.reshape(-1)
 
@@ -314,42 +318,6 @@ def _kabsch_batch(P: NDArray[np.float64], Q: NDArray[np.float64]) -> NDArray[np.
 # Matching and pose
 
 
-def _match_candidates(
-    descriptors_ref: NDArray[np.generic], descriptors_cur: NDArray[np.generic], ia: NDArray[np.intp],
-    ib: NDArray[np.intp], kind: str, ratio: float, mutual: bool,
-) -> tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.float32]]:
-    """Nearest neighbour + ratio + mutual over candidate pairs, like :func:`~lightfast.vtr.stereo.match_descriptors`
-    with ``candidates`` but faster for the many pairs of guided matching (64-bit popcount, one integer sort)."""
-    if kind == "orb" and descriptors_ref.shape[1] % 8 == 0:
-        wa = np.ascontiguousarray(descriptors_ref).view(np.uint64)
-        wb = np.ascontiguousarray(descriptors_cur).view(np.uint64)
-        d = np.bitwise_count(wa[ia] ^ wb[ib]).sum(axis=1).astype(np.int64)
-        scale = 1
-    else:
-        d_f = pair_distances(descriptors_ref, descriptors_cur, ia, ib, kind)
-        scale = 1000  # integer keys with 1e-3 resolution
-        d = np.rint(d_f.astype(np.float64) * scale).astype(np.int64)
-    big = int(d.max()) + 2 if d.size else 2
-    order = np.argsort(ia.astype(np.int64) * big + d)
-    ia_s, ib_s, d_s = ia[order], ib[order], d[order]
-    first = np.flatnonzero(np.r_[True, ia_s[1:] != ia_s[:-1]])
-    nxt = first + 1
-    has_second = nxt < ia_s.size
-    has_second[has_second] = ia_s[nxt[has_second]] == ia_s[first[has_second]]
-    d2 = np.full(first.size, np.inf)
-    d2[has_second] = d_s[nxt[has_second]]
-    i, j, d1 = ia_s[first], ib_s[first], d_s[first].astype(np.float64)
-    keep = d1 < ratio * d2
-    if mutual:
-        order_b = np.argsort(ib.astype(np.int64) * big + d)
-        ib_b = ib[order_b]
-        firsts_b = order_b[np.r_[True, ib_b[1:] != ib_b[:-1]]]
-        best_a_of_b = np.full(len(descriptors_cur), -1, np.intp)
-        best_a_of_b[ib[firsts_b]] = ia[firsts_b]
-        keep &= best_a_of_b[j] == i
-    return i[keep], j[keep], (d1[keep] / scale).astype(np.float32)
-
-
 def match_landmarks(
     points_ref: NDArray[np.float64],
     descriptors_ref: NDArray[np.generic],
@@ -391,11 +359,11 @@ def match_landmarks(
             return empty
         ia = idx_front[pairs["i"].astype(np.intp)]
         ib = pairs["j"].astype(np.intp)
-        i_ref, i_cur, dist = _match_candidates(descriptors_ref, descriptors_cur, ia, ib, kind, ratio, mutual)
+        i_ref, i_cur, dist = match_descriptors(descriptors_ref, descriptors_cur, kind, ratio=ratio, mutual=mutual,
+                                               candidates=(ia, ib), max_distance=max_distance)
     else:
-        i_ref, i_cur, dist = match_descriptors(descriptors_ref, descriptors_cur, kind, ratio=ratio, mutual=mutual)
-    keep = dist <= max_distance
-    i_ref, i_cur, dist = i_ref[keep], i_cur[keep], dist[keep]
+        i_ref, i_cur, dist = match_descriptors(descriptors_ref, descriptors_cur, kind, ratio=ratio, mutual=mutual,
+                                               max_distance=max_distance)
     if not mutual and i_cur.size:  # one reference landmark per current keypoint: the nearest descriptor
         order = np.lexsort((dist, i_cur))
         first = order[np.r_[True, i_cur[order][1:] != i_cur[order][:-1]]]
