@@ -92,6 +92,36 @@ _MIN_POINTS = 30
 _SETTLE_HISTORY = 4
 
 
+def finite_vse_cloud(points: ArrayLike, intensities: ArrayLike | None) -> tuple[Array, Array | None,
+                                                                              NDArray[np.bool_]]:
+    """A VSE cloud ``(n, 3)`` and its intensities ``(n,)`` (or None) without the rows that hold a non-finite
+    coordinate or intensity; also returns the kept-rows mask. Bad shapes, or fewer than 30 points left, raise
+    :class:`AlignmentError`."""
+    try:
+        pts = np.array(points, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise AlignmentError(f"the VSE cloud must be an (n, 3) array: {exc}") from None
+    if pts.ndim != 2 or pts.shape[1] != 3:
+        raise AlignmentError(f"the VSE cloud must have shape (n, 3), got {pts.shape}")
+    ok = np.all(np.isfinite(pts), axis=1)
+    inten = None
+    if intensities is not None:
+        try:
+            inten = np.array(intensities, dtype=np.float64)
+        except (TypeError, ValueError) as exc:
+            raise AlignmentError(f"the VSE intensities must be an (n,) array: {exc}") from None
+        if inten.shape != (len(pts),):
+            raise AlignmentError(f"the VSE intensities must have shape ({len(pts)},), got {inten.shape}")
+        ok &= np.isfinite(inten)
+        inten = inten[ok]
+    pts = pts[ok]
+    if len(pts) < _MIN_POINTS:
+        raise AlignmentError(
+            f"the VSE cloud has {len(pts)} finite points (of {len(ok)}); at least {_MIN_POINTS} are needed"
+        )
+    return pts, inten, ok
+
+
 class SchemeError(RacrError):
     """The alignment thread stopped on an unexpected error (the original is the ``__cause__``), or the scheme was
     used out of order (started twice, stepped while its thread runs)."""
@@ -386,28 +416,7 @@ class RacrScheme:
         T_cur_cam, camera)``). Rows with a non-finite coordinate or intensity are dropped; fewer than 30 points
         left, bad shapes, a non-rigid pose or an invalid keyframe raise (and nothing is queued)."""
         self._raise_fatal()
-        try:
-            pts = np.array(points_cur, dtype=np.float64)
-        except (TypeError, ValueError) as exc:
-            raise AlignmentError(f"points_cur must be an (n, 3) array: {exc}") from None
-        if pts.ndim != 2 or pts.shape[1] != 3:
-            raise AlignmentError(f"points_cur must have shape (n, 3), got {pts.shape}")
-        ok = np.all(np.isfinite(pts), axis=1)
-        inten = None
-        if intensities is not None:
-            try:
-                inten = np.array(intensities, dtype=np.float64)
-            except (TypeError, ValueError) as exc:
-                raise AlignmentError(f"intensities must be an (n,) array: {exc}") from None
-            if inten.shape != (len(pts),):
-                raise AlignmentError(f"intensities must have shape ({len(pts)},), got {inten.shape}")
-            ok &= np.isfinite(inten)
-            inten = inten[ok]
-        pts = pts[ok]
-        if len(pts) < _MIN_POINTS:
-            raise AlignmentError(
-                f"the VSE cloud has {len(pts)} finite points (of {len(ok)}); at least {_MIN_POINTS} are needed"
-            )
+        pts, inten, ok = finite_vse_cloud(points_cur, intensities)
         if not np.all(ok):
             logger.debug("dropped %d non-finite VSE points of %d", int(np.count_nonzero(~ok)), len(ok))
         T = _rigid(T_cur_cam, "T_cur_cam")

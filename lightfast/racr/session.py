@@ -48,11 +48,11 @@ from lightfast.camera import PinholeCamera
 from lightfast.config import Config, ConfigError, param
 from lightfast.geometry import make_transform, so3_exp
 from lightfast.racr.adjustment import AdjustmentConfig, _inverse, _rigid, camera_pose_in_reference
-from lightfast.racr.errors import AlignmentError, InitializationError, RacrError
+from lightfast.racr.errors import InitializationError, RacrError
 from lightfast.racr.fast_alignment import FastAlignmentConfig, ReferenceCloud
 from lightfast.racr.fine_alignment import FineAlignmentConfig, Keyframe
 from lightfast.racr.initialization import HandEyeResult, InitializationConfig, initialize
-from lightfast.racr.scheme import RacrScheme, SchemeConfig, SchemeStatus
+from lightfast.racr.scheme import RacrScheme, SchemeConfig, SchemeStatus, finite_vse_cloud
 
 __all__ = [
     "HAND_AXES",
@@ -72,7 +72,6 @@ HAND_AXES = {"x": (1.0, 0.0, 0.0), "y": (0.0, 1.0, 0.0), "z": (0.0, 0.0, 1.0)}
 #: Stages before the scheme runs; after that the stage is the scheme's (``SCHEME_STAGES``: aligning, ready,
 #: moving, converged, platform_timeout, failed).
 SESSION_STAGES = ("waiting_for_platform", "waiting_for_vse", "initializing", "initialization_failed")
-_MIN_POINTS = 30  # the scheme's minimum (RacrScheme refuses fewer finite points)
 
 
 @dataclass(frozen=True)
@@ -176,28 +175,7 @@ def _check_observation(points_vse: ArrayLike, intensities: ArrayLike | None,
                                                                                     tuple[Keyframe, ...]]:
     """Shape, finiteness and keyframe checks of a VSE observation (the scheme's rules): rows with a non-finite
     coordinate or intensity are dropped; fewer than 30 left raises :class:`AlignmentError`."""
-    try:
-        pts = np.array(points_vse, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise AlignmentError(f"the VSE cloud must be an (n, 3) array: {exc}") from None
-    if pts.ndim != 2 or pts.shape[1] != 3:
-        raise AlignmentError(f"the VSE cloud must have shape (n, 3), got {pts.shape}")
-    ok = np.all(np.isfinite(pts), axis=1)
-    inten = None
-    if intensities is not None:
-        try:
-            inten = np.array(intensities, dtype=np.float64)
-        except (TypeError, ValueError) as exc:
-            raise AlignmentError(f"the VSE intensities must be an (n,) array: {exc}") from None
-        if inten.shape != (len(pts),):
-            raise AlignmentError(f"the VSE intensities must have shape ({len(pts)},), got {inten.shape}")
-        ok &= np.isfinite(inten)
-        inten = inten[ok]
-    pts = pts[ok]
-    if len(pts) < _MIN_POINTS:
-        raise AlignmentError(
-            f"the VSE cloud has {len(pts)} finite points (of {len(ok)}); at least {_MIN_POINTS} are needed"
-        )
+    pts, inten, _ = finite_vse_cloud(points_vse, intensities)
     return pts, inten, tuple(Keyframe.coerce(k) for k in keyframes)
 
 
