@@ -220,8 +220,27 @@ def _pca_normals(P: Array, radius: float, max_nn: int) -> tuple[Array, NDArray[n
     return vec[:, :, 0], count >= _MIN_NORMAL_NEIGHBOURS
 
 
+class SimilarityEstimate:
+    """Shared by the alignment results: ``T_ref_cur`` = T_p and ``sigma`` = σ_p (Eq. 9) as a similarity."""
+
+    T_ref_cur: Array
+    sigma: float
+
+    @property
+    def S_ref_cur(self) -> Array:
+        """The similarity ``[[σ_p R_p, t_p], [0, 1]]`` mapping current points into the reference frame."""
+        S = self.T_ref_cur.copy()
+        S[:3, :3] *= self.sigma
+        return S
+
+    def transform(self, points_cur: ArrayLike) -> Array:
+        """``R_p (σ_p p) + t_p`` for current points ``(n, 3)``."""
+        p = np.asarray(points_cur, dtype=np.float64)
+        return self.sigma * p @ self.T_ref_cur[:3, :3].T + self.T_ref_cur[:3, 3]
+
+
 @dataclass(frozen=True)
-class FastAlignmentResult:
+class FastAlignmentResult(SimilarityEstimate):
     """Outcome of :func:`fast_align`: ``T_ref_cur`` = T_p (rigid, 4×4) and ``sigma`` = σ_p (Eq. 9).
 
     ``correspondences``, ``fitness`` (their fraction of the sampled points) and ``rmse_m`` (RMS point-to-plane
@@ -240,18 +259,6 @@ class FastAlignmentResult:
     scale_change: float
     points_used: int
     seconds: float = field(compare=False)
-
-    @property
-    def S_ref_cur(self) -> Array:
-        """The similarity ``[[σ_p R_p, t_p], [0, 1]]`` mapping current points into the reference frame."""
-        S = self.T_ref_cur.copy()
-        S[:3, :3] *= self.sigma
-        return S
-
-    def transform(self, points_cur: ArrayLike) -> Array:
-        """``R_p (σ_p p) + t_p`` for current points ``(n, 3)``."""
-        p = np.asarray(points_cur, dtype=np.float64)
-        return self.sigma * p @ self.T_ref_cur[:3, :3].T + self.T_ref_cur[:3, 3]
 
 
 def _initial_pose(T: ArrayLike | None) -> tuple[Array, Array]:

@@ -97,7 +97,13 @@ from lightfast.camera import PinholeCamera
 from lightfast.config import Config, ConfigError, param
 from lightfast.geometry import is_rotation, project_to_so3, so3_exp
 from lightfast.racr.errors import AlignmentError
-from lightfast.racr.fast_alignment import FastAlignmentConfig, ReferenceCloud, _cloud, _initial_pose
+from lightfast.racr.fast_alignment import (
+    FastAlignmentConfig,
+    ReferenceCloud,
+    SimilarityEstimate,
+    _cloud,
+    _initial_pose,
+)
 
 __all__ = [
     "LM_METHODS",
@@ -235,7 +241,7 @@ class Keyframe:
 
 
 @dataclass(frozen=True)
-class FineAlignmentResult:
+class FineAlignmentResult(SimilarityEstimate):
     """Outcome of :func:`fine_align`: ``T_ref_cur`` = T_p (rigid 4×4), ``sigma`` = σ_p and the refined keyframe
     poses ``T_cur_keyframes`` ``(K, 4, 4)`` (current-cloud frame, Eq. 16; unchanged with ``refine_keyframes``
     off).
@@ -263,18 +269,6 @@ class FineAlignmentResult:
     pose_change: float
     scale_change: float
     seconds: float = field(compare=False)
-
-    @property
-    def S_ref_cur(self) -> Array:
-        """The similarity ``[[σ_p R_p, t_p], [0, 1]]`` mapping current points into the reference frame."""
-        S = self.T_ref_cur.copy()
-        S[:3, :3] *= self.sigma
-        return S
-
-    def transform(self, points_cur: ArrayLike) -> Array:
-        """``R_p (σ_p p) + t_p`` for current points ``(n, 3)``."""
-        p = np.asarray(points_cur, dtype=np.float64)
-        return self.sigma * p @ self.T_ref_cur[:3, :3].T + self.T_ref_cur[:3, 3]
 
 
 def nearest_per_pixel(pixel: ArrayLike, depth: ArrayLike) -> NDArray[np.bool_]:
