@@ -156,7 +156,8 @@ def _cmd_daylight_prepare(args: argparse.Namespace) -> int:
     from lightfast.daylight.mesh import load_ply
     from lightfast.daylight.sun import Site
 
-    overrides = {k: v for k, v in (("patch_size_m", args.patch_size), ("sky_directions", args.sky_directions),
+    overrides = {k: v for k, v in (("patch_size_m", args.patch_size), ("normal_merge_deg", args.normal_merge),
+                                   ("sky_directions", args.sky_directions),
                                    ("sun_samples", args.sun_samples), ("iterations", args.iterations))
                  if v is not None}
     config = config_from_mapping(LightingMapConfig, overrides)
@@ -298,6 +299,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("site", help="site YAML (latitude_deg, longitude_deg, altitude_m, heading_deg, timezone)")
     p.add_argument("out", help="lighting map directory to create")
     p.add_argument("--patch-size", type=float, help="patch edge length in metres (default 0.1)")
+    p.add_argument("--normal-merge", type=float, help="face-normal bins within this many degrees form one patch "
+                   "inside a cell (default 30; 0 keeps every 10° bin apart)")
     p.add_argument("--sky-directions", type=int, help="directional lights over the sphere (default 2048)")
     p.add_argument("--sun-samples", type=int, help="directions inside the solar disk (default 8)")
     p.add_argument("--iterations", type=int, help="Jacobi iterations of Eq. 2 (default: until converged)")

@@ -12,11 +12,13 @@ with its f2f pose. Each finished frame is published on ``/tracker/pose`` (PoseSt
 (DiagnosticArray: source f2m/f2f, reason, mode, f2f/f2m ms, inlier ratios, latency). Tracking starts at the
 ``initial_pose`` parameter; a PoseStamped on ``/tracker/reset`` restarts it at that pose.
 
-Threading: the subscription callbacks only convert and buffer. Frame-to-frame tracking runs in a guard-condition
-callback of its own callback group (one new frame per call; a timer of the same group wakes it for reference
-deadlines; parameter changes and resets are applied there too); frame-to-model tracking runs in a second one. The
-tracker's state is touched under one lock and the f2m alignment runs outside it, so that on a multi-threaded
-executor it could overlap the f2f alignment of the next frame; ``main`` still spins one thread (see there).
+Threading: the executor's callbacks only convert and buffer, then wake one of two worker threads. The f2f worker
+tracks the queued frames one at a time, applies parameter changes, resets and camera changes, and finishes frames
+whose reference is overdue (it also wakes on its own every ``reference_timeout_s / 4``, at most 0.1 s). The f2m
+worker refines the frames whose reference came. The tracker's state is touched under one lock and the f2m
+alignment runs outside it, so it overlaps the f2f alignment of the next frame (NumPy and Open3D release the GIL).
+Plain threads rather than callback groups on rclpy's MultiThreadedExecutor: there, guard-condition triggers raised
+while the worker's group was busy got lost (a 20-frame demo lost 7 frames).
 """
 from __future__ import annotations
 
@@ -24,6 +26,7 @@ import sys
 import threading
 import time
 from collections import OrderedDict, deque
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -31,12 +34,10 @@ import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped
 from nav_msgs.msg import Odometry
-from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, Image
 
 from lightfast.camera import PinholeCamera
-from lightfast.errors import LightfastError
 from lightfast.ros.convert import (
     ConversionError,
     camera_from_camera_info,
@@ -134,26 +135,29 @@ class RGBDTrackerNode(Node):
         self.params.on_change = self._on_config
         self.stats = {"frames_in": 0, "frames_tracked": 0, "f2m": 0, "f2f": 0, "dropped_behind": 0,
                       "dropped_unpaired": 0, "late_references": 0, "bad_inputs": 0}
+        self._wake_f2f = threading.Event()
+        self._wake_f2m = threading.Event()
+        self._stopping = threading.Event()
 
-        inputs = MutuallyExclusiveCallbackGroup()
-        work = MutuallyExclusiveCallbackGroup()
-        refine = MutuallyExclusiveCallbackGroup()
         self.coarse_pub = self.create_publisher(PoseStamped, COARSE_POSE_TOPIC, SENSOR_QOS)
         self.pose_pub = self.create_publisher(PoseStamped, TRACKER_POSE_TOPIC, SENSOR_QOS)
         self.odom_pub = self.create_publisher(Odometry, TRACKER_ODOMETRY_TOPIC, SENSOR_QOS)
         self.status_pub = self.create_publisher(DiagnosticArray, TRACKER_STATUS_TOPIC, SENSOR_QOS)
         sub = self.create_subscription
-        sub(Image, COLOR_TOPIC, self._on_color, SENSOR_QOS, callback_group=inputs)
-        sub(Image, DEPTH_TOPIC, self._on_depth, SENSOR_QOS, callback_group=inputs)
-        sub(CameraInfo, COLOR_INFO_TOPIC, self._on_camera_info, SENSOR_QOS, callback_group=inputs)
-        sub(Image, REFERENCE_COLOR_TOPIC, self._on_ref_color, SENSOR_QOS, callback_group=inputs)
-        sub(Image, REFERENCE_DEPTH_TOPIC, self._on_ref_depth, SENSOR_QOS, callback_group=inputs)
-        sub(PoseStamped, TRACKER_RESET_TOPIC, self._on_reset, SENSOR_QOS, callback_group=inputs)
-        self.work_trigger = self.create_guard_condition(self._work, callback_group=work)
-        self.refine_trigger = self.create_guard_condition(self._refine_work, callback_group=refine)
-        # the deadline timer only wakes the worker: references already received are handled before deadlines
-        self.deadline_timer = self.create_timer(self._deadline_period(cfg), self.work_trigger.trigger,
-                                                callback_group=work)
+        sub(Image, COLOR_TOPIC, self._on_color, SENSOR_QOS)
+        sub(Image, DEPTH_TOPIC, self._on_depth, SENSOR_QOS)
+        sub(CameraInfo, COLOR_INFO_TOPIC, self._on_camera_info, SENSOR_QOS)
+        sub(Image, REFERENCE_COLOR_TOPIC, self._on_ref_color, SENSOR_QOS)
+        sub(Image, REFERENCE_DEPTH_TOPIC, self._on_ref_depth, SENSOR_QOS)
+        sub(PoseStamped, TRACKER_RESET_TOPIC, self._on_reset, SENSOR_QOS)
+        self._workers = [
+            threading.Thread(target=self._worker, args=(self._wake_f2f, self._work, True), name="tracker-f2f",
+                             daemon=True),
+            threading.Thread(target=self._worker, args=(self._wake_f2m, self._refine_work, False),
+                             name="tracker-f2m", daemon=True),
+        ]
+        for t in self._workers:
+            t.start()
         self.get_logger().info(f"mode {cfg.mode}, reference timeout {cfg.reference_timeout_s} s, start pose "
                                f"{list(cfg.initial_pose)}; kernels warmed up in {warm_s:.2f} s")
 
@@ -208,7 +212,7 @@ class RGBDTrackerNode(Node):
         while len(self._frames) > MAX_QUEUED:
             self._frames.popleft()
             self.stats["dropped_behind"] += 1
-        self.work_trigger.trigger()
+        self._wake_f2f.set()
 
     def _on_ref_color(self, msg: Image) -> None:
         try:
@@ -231,7 +235,7 @@ class RGBDTrackerNode(Node):
     def _enqueue_ref(self, stamp: int, pair: tuple[np.ndarray, np.ndarray] | None) -> None:
         if pair is not None:
             self._ref_queue.append((stamp, *pair))
-            self.refine_trigger.trigger()
+            self._wake_f2m.set()
 
     def _on_camera_info(self, msg: CameraInfo) -> None:
         try:
@@ -252,22 +256,43 @@ class RGBDTrackerNode(Node):
             return
         with self._lock:
             self._reset = (T, stamp or None)
-        self.work_trigger.trigger()
+        self._wake_f2f.set()
 
     def _on_config(self, cfg: TrackerConfig) -> None:
         with self._lock:
             self._new_config = cfg
-        self.work_trigger.trigger()
+        self._wake_f2f.set()
 
-    # ---------------------------------------------------------------------------------------------- worker
+    # ---------------------------------------------------------------------------------------------- workers
 
-    def _work(self) -> None:
-        try:
-            self._work_once()
-        except LightfastError as exc:  # a safety net: an unexpected core error must not stop the node
-            self._problem("internal", f"tracking step failed: {exc}", Level.ERROR)
+    def _worker(self, wake: threading.Event, step: Callable[[], bool], periodic: bool) -> None:
+        """Run ``step`` whenever ``wake`` is set (and every deadline period if ``periodic``) until the node stops;
+        ``step`` returns whether work is left. An error in a step is reported and the worker goes on."""
+        while not self._stopping.is_set():
+            wake.wait(self._deadline_period(self.config) if periodic else None)
+            wake.clear()  # before the step: a wake-up during the step runs it again
+            if self._stopping.is_set():
+                return
+            more = True
+            while more and not self._stopping.is_set():
+                try:
+                    more = step()
+                except Exception as exc:  # a safety net: a dead worker thread would stop tracking silently
+                    self._problem("internal", f"{threading.current_thread().name} step failed: {exc!r}",
+                                  Level.ERROR)
+                    more = False
 
-    def _work_once(self) -> None:
+    def destroy_node(self) -> None:
+        self._stopping.set()
+        self._wake_f2f.set()
+        self._wake_f2m.set()
+        for t in self._workers:
+            if t is not threading.current_thread():
+                t.join(timeout=5.0)
+        super().destroy_node()
+
+    def _work(self) -> bool:
+        """One f2f step: pending changes, overdue references, at most one new frame. Returns whether frames wait."""
         with self._lock:
             new_config, self._new_config = self._new_config, None
             reset, self._reset = self._reset, None
@@ -284,22 +309,20 @@ class RGBDTrackerNode(Node):
             self._finish_overdue()
             if frame is not None:
                 self._track(frame, camera)
-        if more:
-            self.work_trigger.trigger()  # one frame per call: the other callbacks get their turn in between
+        return more
 
-    def _refine_work(self) -> None:
+    def _refine_work(self) -> bool:
+        """One f2m step: the oldest received reference. Returns whether more wait."""
         with self._lock:
-            refs = list(self._ref_queue)
-            self._ref_queue.clear()
-        try:
-            for stamp, rgb, depth in refs:
-                self._refine(stamp, rgb, depth)
-        except LightfastError as exc:  # a safety net, as in _work
-            self._problem("internal", f"f2m step failed: {exc}", Level.ERROR)
+            if not self._ref_queue:
+                return False
+            stamp, rgb, depth = self._ref_queue.popleft()
+            more = bool(self._ref_queue)
+        self._refine(stamp, rgb, depth)
+        return more
 
     def _apply_config(self, cfg: TrackerConfig) -> None:
         old, self.config = self.config, cfg
-        self.deadline_timer.timer_period_ns = int(self._deadline_period(cfg) * 1e9)
         if self.tracker is None:
             self._start_pose = cfg.T_map_cam_initial if old.initial_pose != cfg.initial_pose else self._start_pose
             return
@@ -434,8 +457,6 @@ class RGBDTrackerNode(Node):
 
 
 def main(args: list[str] | None = None) -> int:
-    # one thread: on rclpy's MultiThreadedExecutor the guard-condition triggers raised while the worker's group is
-    # busy got lost (the tiny demo lost 7 of 20 frames), so f2f and f2m do not overlap yet
     return run_node(RGBDTrackerNode, NODE_NAME, args)
 
 

@@ -58,6 +58,9 @@ class LightingMapConfig(Config):
 
     patch_size_m: float = param(0.1, description="Edge length of the planar patches of §III-E, in metres.",
                                 min=0.005, max=10.0)
+    normal_merge_deg: float = param(30.0, description="Inside a patch cell, face-normal bins within this angle of "
+                                    "a region's dominant bin form one patch (absorbs the normal scatter of "
+                                    "reconstructed meshes; 0 keeps every 10° bin apart).", min=0.0, max=89.0)
     sky_directions: int = param(2048, description="Directional lights over the whole sphere (Fibonacci); those "
                                 "above the horizon form the sky, the others the ground.", min=8, max=1_000_000)
     sun_samples: int = param(8, description="Directions inside the solar disk (area sun, paper Fig. 4).",
@@ -180,7 +183,8 @@ class LightingMap:
                     f"expects {str(expected)[:12]}…"
                 )
         try:
-            config = config_from_mapping(LightingMapConfig, meta["config"])
+            # maps from before the normal merge grouped faces by normal bin alone
+            config = config_from_mapping(LightingMapConfig, {"normal_merge_deg": 0.0, **meta["config"]})
             site = config_from_mapping(Site, meta["site"])
             with np.load(path / "lighting_map.npz", allow_pickle=False) as npz:
                 a = {k: npz[k] for k in npz.files}
@@ -252,7 +256,7 @@ def prepare_lighting_map(
     except MeshError as exc:
         raise LightingMapError(f"cannot prepare a lighting map: {exc}") from None
     caster = RayCaster(mesh.vertices_m, mesh.faces)
-    patches = build_patches(mesh, patch_size_m=config.patch_size_m)
+    patches = build_patches(mesh, patch_size_m=config.patch_size_m, normal_merge_deg=config.normal_merge_deg)
     log.info("%d vertices, %d faces, %d patches", mesh.num_vertices, mesh.num_faces, patches.count)
     transport = PatchTransport.compute(patches, caster, hemisphere_rays=config.hemisphere_rays,
                                        offset_m=config.ray_offset_m, progress=progress)

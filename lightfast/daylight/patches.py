@@ -1,9 +1,13 @@
 """Uniformly sized planar patches of the mesh (paper §III-E, after [4]).
 
 Radiosity transport between every pair of vertices costs |V|² rays; the paper groups connected vertices of planar
-regions into patches P (about 10×10 cm) and propagates light from patches instead, which costs |V|·|P|. Here a
-triangle joins the patch of its (normal direction, 3-D grid cell) pair: triangles of one plane inside one cell
-of ``patch_size_m`` form a patch, so patches are planar and at most a cell across.
+regions into patches P (about 10×10 cm) and propagates light from patches instead, which costs |V|·|P|. Here the
+triangles inside one 3-D grid cell of ``patch_size_m`` are grouped by normal direction: face normals are quantized
+to a Fibonacci sphere, and within each cell the direction bins are merged greedily into regions — the bin holding
+most area seeds a region that takes every bin of the cell within ``normal_merge_deg`` of it, then the largest bin
+left seeds the next; stray regions under a tenth of a cell face's area join the nearest larger region in direction. Patches are thus nearly planar and at most a cell across. The merge matters for reconstructed
+maps: marching-cubes face normals scatter by several degrees around the plane's normal, and without it every cell
+of a wall would split into a dozen patches.
 
 Each patch carries its area, area-weighted centroid and unit normal, mean reflectance, and a *sample point*: the
 centroid of its triangle closest to the area centroid, which always lies on the surface. Two sparse matrices tie
@@ -15,6 +19,7 @@ patches and vertices together:
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -49,26 +54,41 @@ def build_patches(
     *,
     patch_size_m: float = 0.1,
     normal_bins: int = 400,
+    normal_merge_deg: float = 0.0,
     interpolation_neighbours: int = 8,
     min_normal_cos: float = 0.8,
 ) -> Patches:
     """Group the triangles of ``mesh`` into planar patches of at most ``patch_size_m`` across.
 
-    ``normal_bins`` directions (Fibonacci sphere, ~10° apart for 400) quantize face normals; faces of one bin in one
-    grid cell form a patch. ``interpolation_neighbours`` and ``min_normal_cos`` shape :attr:`Patches.patch_to_vertex`.
+    ``normal_bins`` directions (Fibonacci sphere, ~10° apart for 400) quantize face normals; within a grid cell, bins
+    within ``normal_merge_deg`` of a region's seed bin join it, and regions under a tenth of a cell's face area join
+    the closest larger one within twice that angle (0: every bin is its own patch).
+    ``interpolation_neighbours`` and ``min_normal_cos`` shape :attr:`Patches.patch_to_vertex`.
     """
     if patch_size_m <= 0:
         raise MeshError(f"patch_size_m must be > 0, got {patch_size_m}")
+    if not 0.0 <= normal_merge_deg < 90.0:
+        raise MeshError(f"normal_merge_deg must be in [0, 90), got {normal_merge_deg}")
     fn = mesh.face_normals
     fa = mesh.face_areas_m2
     v = mesh.vertices_m
     fc = v[mesh.faces].mean(axis=1)
 
     # nearest of ``normal_bins`` directions (Euclidean nearest = largest dot product for unit vectors)
-    _, normal_bin = cKDTree(fibonacci_sphere(normal_bins)).query(fn)
+    directions = fibonacci_sphere(normal_bins)
+    _, normal_bin = cKDTree(directions).query(fn)
     cell = np.floor((fc - fc.min(axis=0)) / patch_size_m).astype(np.int64)
-    keys = np.stack([normal_bin, cell[:, 0], cell[:, 1], cell[:, 2]], axis=1)
-    _, face_patch = np.unique(keys, axis=0, return_inverse=True)
+    _, face_cell = np.unique(cell, axis=0, return_inverse=True)
+    node_keys, face_node = np.unique(np.stack([face_cell.reshape(-1), normal_bin], axis=1), axis=0,
+                                     return_inverse=True)
+    face_node = face_node.reshape(-1)
+    if normal_merge_deg > 0.0:
+        node_area = np.bincount(face_node, weights=fa, minlength=len(node_keys))
+        node_region = _merge_bins(node_keys[:, 0], directions[node_keys[:, 1]], node_area,
+                                  math.cos(math.radians(normal_merge_deg)), min_area=0.1 * patch_size_m**2)
+        _, face_patch = np.unique(node_region[face_node], return_inverse=True)
+    else:
+        face_patch = face_node
     face_patch = face_patch.reshape(-1).astype(np.int64)
     n_patches = int(face_patch.max()) + 1
 
@@ -103,6 +123,57 @@ def build_patches(
         neighbours=interpolation_neighbours, min_normal_cos=min_normal_cos,
     )
     return Patches(face_patch, area, centroid, normal, reflectance, sample_point, vertex_to_patch, patch_to_vertex)
+
+
+def _merge_bins(node_cell: NDArray[np.int64], node_dir: NDArray[np.float64], node_area: NDArray[np.float64],
+                min_cos: float, min_area: float) -> NDArray[np.int64]:
+    """Region id (a seed node's index) of every (cell, normal bin) node.
+
+    Per cell, the unassigned node with most area seeds a region and takes every unassigned node of its cell within
+    ``min_cos``; repeat until none is left (vectorized over cells: the loop runs once per region of the most
+    fragmented cell). Then a region smaller than ``min_area`` — the stray normals of a noisy surface — joins the
+    region of its cell that is at least ``min_area`` large and closest in direction, if that is within twice the
+    merge angle; otherwise (a sliver of another surface) it stays apart.
+    """
+    n = len(node_cell)
+    region = np.full(n, -1, dtype=np.int64)
+    order = np.lexsort((-node_area, node_cell))  # by cell, largest first
+    n_cells = int(node_cell.max()) + 1 if n else 0
+    while True:
+        left = order[region[order] < 0]
+        if not len(left):
+            break
+        first = np.ones(len(left), dtype=bool)
+        first[1:] = node_cell[left][1:] != node_cell[left][:-1]
+        seed_of_cell = np.full(n_cells, -1, dtype=np.int64)
+        seed_of_cell[node_cell[left[first]]] = left[first]
+        seed = seed_of_cell[node_cell[left]]
+        join = np.einsum("nc,nc->n", node_dir[left], node_dir[seed]) >= min_cos
+        join[first] = True
+        region[left[join]] = seed[join]
+
+    seeds = np.unique(region)
+    area = np.bincount(region, weights=node_area, minlength=n)[seeds]
+    big, small = seeds[area >= min_area], seeds[area < min_area]
+    if not len(big) or not len(small):
+        return region
+    # the big regions of each cell, ranked; try each rank against every small region of the same cell
+    big = big[np.argsort(node_cell[big], kind="stable")]
+    rank = np.arange(len(big)) - np.searchsorted(node_cell[big], node_cell[big])
+    best_cos = np.full(len(small), -2.0)
+    best = np.full(len(small), -1, dtype=np.int64)
+    for r in range(int(rank.max()) + 1):
+        of_cell = np.full(n_cells, -1, dtype=np.int64)
+        of_cell[node_cell[big[rank == r]]] = big[rank == r]
+        cand = of_cell[node_cell[small]]
+        cos = np.where(cand >= 0, np.einsum("nc,nc->n", node_dir[small], node_dir[np.maximum(cand, 0)]), -2.0)
+        better = cos > best_cos
+        best_cos[better], best[better] = cos[better], cand[better]
+    two_angles = 2.0 * min_cos * min_cos - 1.0  # cos(2θ)
+    absorbed = best_cos >= two_angles
+    target = np.arange(n)
+    target[small[absorbed]] = best[absorbed]
+    return target[region]
 
 
 def _interpolation_matrix(
