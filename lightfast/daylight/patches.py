@@ -5,9 +5,10 @@ regions into patches P (about 10×10 cm) and propagates light from patches inste
 triangles inside one 3-D grid cell of ``patch_size_m`` are grouped by normal direction: face normals are quantized
 to a Fibonacci sphere, and within each cell the direction bins are merged greedily into regions — the bin holding
 most area seeds a region that takes every bin of the cell within ``normal_merge_deg`` of it, then the largest bin
-left seeds the next; stray regions under a tenth of a cell face's area join the nearest larger region in direction. Patches are thus nearly planar and at most a cell across. The merge matters for reconstructed
-maps: marching-cubes face normals scatter by several degrees around the plane's normal, and without it every cell
-of a wall would split into a dozen patches.
+left seeds the next; stray regions under a tenth of a cell face's area join the nearest larger region in direction.
+Patches are thus nearly planar and at most a cell across. The merge matters for reconstructed maps: marching-cubes
+face normals scatter by several degrees around the plane's normal, and without it every cell of a wall would split
+into a dozen patches.
 
 Each patch carries its area, area-weighted centroid and unit normal, mean reflectance, and a *sample point*: the
 centroid of its triangle closest to the area centroid, which always lies on the surface. Two sparse matrices tie
