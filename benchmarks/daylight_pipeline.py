@@ -3,8 +3,10 @@
 Runs ``scripts/demo.sh`` — ``sun_update_node``, ``daylight_relight_node`` and ``rgbd_tracker_node`` as separate
 processes, the recording replayed in real time with ``/clock`` and recorded — at 320×240 and 640×480, with the sun
 update re-started every ``--sun-period`` seconds of sim time so that B̂_sun chunks stream while the frames are
-tracked, and scores each run with ``lightfast eval recording``. Prints a markdown table and writes
-``benchmarks/results/daylight_pipeline.{md,json}``.
+tracked, and scores each run with ``lightfast eval recording``. For reference, the same frames also go through the
+same core objects in one process and one thread (``lightfast.eval.daylight.run_sequence``: no transport, no
+overlap), which gives the CPU cost of each stage of paper Table II without the scheduling of five processes on two
+cores. Prints markdown tables and writes ``benchmarks/results/daylight_pipeline.{md,json}``.
 
 Usage: ``.venv/bin/python benchmarks/daylight_pipeline.py [--frames 300] [--sizes 320x240 640x480]``
 """
@@ -12,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import datetime as dt
+import hashlib
 import json
 import os
 import platform
@@ -29,9 +32,10 @@ def _load() -> str:
         return fh.read().split()[0]
 
 
-def run(size: str, frames: int, sun_period: float, out: Path, mode: str) -> dict:
+def run(size: str, frames: int, sun_period: float, out: Path, mode: str, tracker_params: dict[str, str]) -> dict:
     env = dict(os.environ, LIGHTFAST_OUT=str(out), SIZE=size, FRAMES=str(frames), MODE=mode,
-               SUN_UPDATE_PERIOD=str(sun_period), SEQUENCE="DS1.T6")
+               SUN_UPDATE_PERIOD=str(sun_period), SEQUENCE="DS1.T6",
+               TRACKER_PARAMS=" ".join(f"{k}:={v}" for k, v in tracker_params.items()))
     load_before = _load()
     proc = subprocess.run(["bash", str(ROOT / "scripts" / "demo.sh")], env=env, capture_output=True, text=True,
                           timeout=7200)
@@ -58,6 +62,29 @@ def run(size: str, frames: int, sun_period: float, out: Path, mode: str) -> dict
     }
 
 
+def in_process(size: str, frames: int, out: Path, mode: str, tracker_params: dict) -> dict:
+    """The demo's recording and lighting map through ``run_sequence`` in this process: per-stage wall and CPU ms."""
+    import time
+
+    import numpy as np
+
+    from lightfast.daylight.lighting_map import LightingMap
+    from lightfast.eval.daylight import run_sequence
+    from lightfast.tracking.pipeline import TrackerConfig
+
+    sim = out / f"daylight-sim-{size}-{frames}-0.04"
+    map_ply = sim / "scenes" / "DS1.map.ply"
+    lmap = LightingMap.load(sim / "maps" / f"DS1-0.1-{hashlib.sha1(map_ply.read_bytes()).hexdigest()[:12]}")
+    cfg = TrackerConfig(**tracker_params)
+    cpu0, wall0 = time.process_time(), time.monotonic()
+    run = run_sequence(sim / "DS1.T6", lmap, mode, progress=False, tracker_config=cfg)
+    cpu, wall = time.process_time() - cpu0, time.monotonic() - wall0
+    st = {k: float(np.median([getattr(f, k) for f in run.frames[5:]]))
+          for k in ("f2f_ms", "render_ms", "estimate_ms", "f2m_ms")}
+    return {"size": size, "frames": len(run.frames), "cpu_ms_per_frame": 1e3 * cpu / len(run.frames),
+            "wall_ms_per_frame": 1e3 * wall / len(run.frames), "stages_median_ms": st, "tracker_params": tracker_params}
+
+
 def markdown(runs: list[dict], args: argparse.Namespace) -> str:
     lines = [
         "# Cross-process tracking pipeline (paper §IV-D, Table II)",
@@ -78,11 +105,27 @@ def markdown(runs: list[dict], args: argparse.Namespace) -> str:
         def ms(k: str, st: dict = st) -> str:
             return f"{st[k]['median_ms']:.1f}" if k in st else "—"
 
+        opts = "".join(f" {k}={v}" for k, v in r["in_process"]["tracker_params"].items())
         lines.append(
-            f"| {r['size']} | **{r['fps']:.1f}** | {r['poses']}/{r['frames']} | {r['f2m']} | "
+            f"| {r['size']}{opts} | **{r['fps']:.1f}** | {r['poses']}/{r['frames']} | {r['f2m']} | "
             f"{r['latency_median_ms']:.0f} ms | {r['latency_p95_ms']:.0f} ms | {ms('f2f')} | {ms('rendering')} | "
             f"{ms('estimation')} | {ms('f2m')} | {r['sun_chunks']} ({r['sun_epochs']}) | {r['rmse_cm']:.2f} cm | "
             f"{r['loss_percent']:.1f} % |")
+    lines += [
+        "",
+        "In one process and one thread, the same frames through the same core objects (`run_sequence`; per-stage "
+        "medians of wall time, and the process CPU time per frame including image decoding):",
+        "",
+        "| size | tracker options | f2f ms | rendering ms | estimation ms | f2m ms | CPU ms/frame | wall ms/frame |",
+        "|---|---|---:|---:|---:|---:|---:|---:|",
+    ]
+    for r in runs:
+        q = r["in_process"]
+        st = q["stages_median_ms"]
+        opts = " ".join(f"{k}={v}" for k, v in q["tracker_params"].items()) or "defaults"
+        lines.append(f"| {r['size']} | {opts} | {st['f2f_ms']:.1f} | {st['render_ms']:.1f} | "
+                     f"{st['estimate_ms']:.1f} | {st['f2m_ms']:.1f} | {q['cpu_ms_per_frame']:.1f} | "
+                     f"{q['wall_ms_per_frame']:.1f} |")
     lines += [
         "",
         "Goal (issue): ≥ 30 poses/s at 320×240 and ≥ 15 at 640×480 on this 2-core machine. Paper (RTX 2080 Ti, "
@@ -102,9 +145,18 @@ def main() -> int:
     p.add_argument("--sizes", nargs="+", default=["320x240", "640x480"])
     p.add_argument("--sun-period", type=float, default=20.0, help="seconds between sun updates (default 20)")
     p.add_argument("--mode", default="proposed")
+    p.add_argument("--tracker-params", type=json.loads, default={},
+                   help='per size, tracker parameters as "key=value ..." (JSON object, e.g. '
+                        '\'{"640x480": "resolution_scale=0.5"}\')')
     p.add_argument("--out", type=Path, default=Path.home() / ".cache" / "lightfast" / "bench-pipeline")
     args = p.parse_args()
-    runs = [run(size, args.frames, args.sun_period, args.out, args.mode) for size in args.sizes]
+    runs = []
+    for size in args.sizes:
+        tracker_params = dict(kv.split("=", 1) for kv in args.tracker_params.get(size, "").split())
+        r = run(size, args.frames, args.sun_period, args.out, args.mode, tracker_params)
+        r["in_process"] = in_process(size, args.frames, args.out, args.mode,
+                                     {k: json.loads(v) for k, v in tracker_params.items()})
+        runs.append(r)
     text = markdown(runs, args)
     print(text)
     RESULTS.mkdir(parents=True, exist_ok=True)

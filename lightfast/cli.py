@@ -342,23 +342,23 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def run(func: Callable[[argparse.Namespace], int], args: argparse.Namespace) -> int:
-    """Run a subcommand, mapping errors to one line on stderr and an exit code."""
+def run(func: Callable[[argparse.Namespace], int], args: argparse.Namespace, *, prog: str = "lightfast") -> int:
+    """Run a subcommand, mapping errors to one line on stderr and an exit code (also for the nodes' tools)."""
     debug = bool(os.environ.get("LIGHTFAST_DEBUG"))
     try:
-        return func(args)
-    except LightfastError as exc:
+        return int(func(args))
+    except (LightfastError, OSError) as exc:  # bad input, missing or unreadable files
         if debug:
             raise
-        print(f"lightfast: error: {exc}", file=sys.stderr)
+        print(f"{prog}: error: {exc}", file=sys.stderr)
         return EXIT_ERROR
     except KeyboardInterrupt:
-        print("lightfast: interrupted", file=sys.stderr)
+        print(f"{prog}: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
     except Exception as exc:
         if debug:
             raise
-        print(f"lightfast: internal error: {type(exc).__name__}: {exc} (set LIGHTFAST_DEBUG=1 for the traceback)",
+        print(f"{prog}: internal error: {type(exc).__name__}: {exc} (set LIGHTFAST_DEBUG=1 for the traceback)",
               file=sys.stderr)
         return EXIT_INTERNAL
 

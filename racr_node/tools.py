@@ -23,6 +23,7 @@ from typing import Any
 
 import numpy as np
 
+from lightfast.cli import run
 from lightfast.errors import LightfastError
 from lightfast.geometry import make_transform, quat_to_matrix
 from lightfast.ros.convert import pose_stamped_to_matrix
@@ -137,13 +138,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                    help="the VSE stand-in's monocular scale if it was not the scene's (for the scale error)")
     p.set_defaults(func=cmd_wait)
     args = parser.parse_args(argv)
-    try:
-        return int(args.func(args))
-    except (LightfastError, OSError) as exc:
-        print(f"{_PROG} {args.command}: error: {exc}", file=sys.stderr)
-        return 1
-    except KeyboardInterrupt:
-        return 130
+    return run(args.func, args, prog=f"{_PROG} {args.command}")
 
 
 if __name__ == "__main__":

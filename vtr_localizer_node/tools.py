@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from lightfast.cli import run
 from lightfast.errors import LightfastError
 from lightfast.ros.convert import pose_to_matrix, stamp_to_ns
 from lightfast.ros.diagnostics import diagnostic_level, diagnostic_values
@@ -229,13 +230,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--repeat-bag", type=Path, help="the repeated bag with /ground_truth/pose")
     p.set_defaults(func=cmd_summary)
     args = parser.parse_args(argv)
-    try:
-        return int(args.func(args))
-    except (LightfastError, OSError) as exc:
-        print(f"{_PROG} {args.command}: error: {exc}", file=sys.stderr)
-        return 1
-    except KeyboardInterrupt:
-        return 130
+    return run(args.func, args, prog=f"{_PROG} {args.command}")
 
 
 if __name__ == "__main__":
