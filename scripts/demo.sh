@@ -52,15 +52,7 @@ if [ ! -f "$map/metadata.json" ]; then
 fi
 initial_pose=$("$lf" bag pose "$seq_dir/bag")  # the evaluation protocol's known start pose
 
-pids=()
-cleanup() {
-  for pid in "${pids[@]}"; do kill -INT "$pid" 2>/dev/null || true; done
-  for pid in "${pids[@]}"; do
-    timeout 10 tail --pid="$pid" -f /dev/null 2>/dev/null || kill -KILL "$pid" 2>/dev/null || true
-  done
-}
-trap cleanup EXIT
-trap 'echo "interrupted"; exit 130' INT TERM
+source "$(dirname "${BASH_SOURCE[0]}")/processes.sh"
 
 logs="$out/demo-logs"
 mkdir -p "$logs"

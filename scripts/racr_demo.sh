@@ -60,18 +60,7 @@ scene_name=$(basename "$scene")
 logs="$out/racr-logs"
 mkdir -p "$logs"
 
-pids=()
-stop() {  # SIGINT, then wait up to 20 s, then SIGKILL
-  local pid=$1
-  kill -INT "$pid" 2>/dev/null || return 0
-  timeout 20 tail --pid="$pid" -f /dev/null 2>/dev/null || kill -KILL "$pid" 2>/dev/null || true
-}
-cleanup() {
-  for pid in "${pids[@]}"; do kill -INT "$pid" 2>/dev/null || true; done
-  for pid in "${pids[@]}"; do stop "$pid"; done
-}
-trap cleanup EXIT
-trap 'echo "interrupted"; exit 130' INT TERM
+source "$(dirname "${BASH_SOURCE[0]}")/processes.sh"
 
 echo "== rACR on $scene_name under the '$lighting' lighting ($mode, time scale ${TIME_SCALE:-10}, eta ${ETA:-1e-3}," \
      "seed $seed; domain $ROS_DOMAIN_ID, logs in $logs)"

@@ -56,23 +56,12 @@ logs="$out/vtr-logs"
 mkdir -p "$logs"
 stereo=(/stereo/left/image_raw /stereo/right/image_raw /stereo/left/camera_info /stereo/right/camera_info)
 
-pids=()
-stop() {  # SIGINT, then wait up to 20 s, then SIGKILL
-  local pid=$1
-  kill -INT "$pid" 2>/dev/null || return 0
-  timeout 20 tail --pid="$pid" -f /dev/null 2>/dev/null || kill -KILL "$pid" 2>/dev/null || true
-}
-cleanup() {
-  for pid in "${pids[@]}"; do kill -INT "$pid" 2>/dev/null || true; done
-  for pid in "${pids[@]}"; do stop "$pid"; done
-}
-trap cleanup EXIT
+source "$(dirname "${BASH_SOURCE[0]}")/processes.sh"
 node_failed() {  # the node's log tells why
   echo "vtr_demo: error: the $1 step failed; last lines of $logs/$1.log:" >&2
   tail -n 20 "$logs/$1.log" >&2
   exit 1
 }
-trap 'echo "interrupted"; exit 130' INT TERM
 
 echo "== teach: vtr_localizer_node on $teach_bag -> $map (domain $ROS_DOMAIN_ID, logs in $logs)"
 # a teach should lose no pair: a long queue

@@ -452,6 +452,19 @@ def _select_by_gradient(c: Array, views: _Views, visible: NDArray[np.bool_], cou
     return np.sort(candidates)
 
 
+def _select_seen_twice(visible: NDArray[np.bool_], count: int, rng: np.random.Generator) -> NDArray[np.intp]:
+    """Indices of up to ``count`` points seen by ≥ 2 keyframes, a seeded random sample (all if ``count`` is 0).
+
+    For E_p, not by gradient strength at the starting estimate: points chosen for sitting on strong edges *there*
+    make the start a local minimum of the gradient-weighted E_p (and a local maximum of the unweighted one) along
+    the motions a near-planar scene leaves photo-consistent (module notes). The reference points are already
+    gradient-selected, by the reference VSE."""
+    candidates = np.flatnonzero(visible.sum(axis=0) >= _MIN_KEYFRAMES)
+    if 0 < count < len(candidates):
+        candidates = rng.choice(candidates, count, replace=False)
+    return np.sort(candidates)
+
+
 def _lm(fun: Callable[[Array, bool], tuple[Array, Array | None]], n: int, config: FineAlignmentConfig) -> Array:
     """One Levenberg–Marquardt solve from zero; ``fun(x, jac)`` returns the residuals and, if asked, the Jacobian.
     MINPACK evaluates trial points without the Jacobian and asks for it at accepted points only."""
@@ -885,7 +898,7 @@ def _photometric_setup(
     tt = sigma * t_K @ R.T + t
     c = _camera_points(reference.points_m, Rt, tt)
     vis, occluded = views.visible(c, config.occlusion_cell_px)
-    sel = _select_by_gradient(c, views, vis, config.max_photometric_points)
+    sel = _select_seen_twice(vis, config.max_photometric_points, np.random.default_rng(config.seed))
     pairs = _pairs(vis[:, sel])
     if len(pairs[0]) < config.min_photometric_residuals:
         raise AlignmentError(
