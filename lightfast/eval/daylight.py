@@ -15,6 +15,11 @@ the site; ground truth is read only here, by the protocol:
 Methods: ``proposed`` (E_crf), ``proposed-lin`` (the same with E_lin, Eq. 6 — the paper's E_crf vs E_lin remark),
 ``refl-f2m``, ``depth-only``, ``no-color-f2m``. B̂_sun is computed once per recording for its middle time (the
 recordings last 20 s; the sun moves 0.08° in that time).
+
+Resumable: every finished (recording, method) run is kept in ``OUT/runs/<recording>.<method>.json`` with a key of
+everything that decides it (the recording's parameters, the lighting map's metadata, the tracker and relighting
+configuration, the frame limit, :data:`PROTOCOL_VERSION`); a later call with the same key reuses it instead of
+running again, so an interrupted evaluation continues where it stopped.
 """
 from __future__ import annotations
 
@@ -58,6 +63,8 @@ METHODS: dict[str, tuple[str, str, str]] = {
     "depth-only": ("depth-only", "relit", "crf"),
     "no-color-f2m": ("no-color-f2m", "relit", "crf"),
 }
+#: Bump when the protocol or the method changes in a way the run key does not see (stored runs are then redone).
+PROTOCOL_VERSION = 2
 LOSS_TRANSLATION_M = 0.10
 LOSS_ROTATION_DEG = 10.0
 
@@ -352,32 +359,101 @@ def evaluate_daylight(sim_dir: Path, out_dir: Path, *, methods: Sequence[str] = 
     out_dir.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     cfg_dict = None if map_config is None else dataclasses.asdict(map_config)
-    jobs_list = [(str(seq), m, str(maps_dir), max_frames, str(sim_dir), cfg_dict) for seq in seq_dirs for m in methods]
+    map_meta = {}
+    for scene in dict.fromkeys(_scene_of(s) for s in seq_dirs):
+        _lighting_map(scene, sim_dir, maps_dir, progress, map_config)  # prepare once, before the workers load it
+        map_meta[scene] = json.loads((maps_dir / scene / "metadata.json").read_text())
     runs: list[SequenceRun] = []
+    todo = []
+    for seq in seq_dirs:
+        for m in methods:
+            key = _run_key(seq, m, map_meta[_scene_of(seq)], max_frames)
+            stored = _load_run(out_dir, seq.name, m, key)
+            if stored is not None:
+                runs.append(stored)
+            else:
+                todo.append(((str(seq), m, str(maps_dir), max_frames, str(sim_dir), cfg_dict), key))
+    if runs:
+        log.info("%d of %d runs reused from %s", len(runs), len(runs) + len(todo), out_dir / "runs")
+
+    def finished(run: SequenceRun, key: str) -> None:
+        _save_run(out_dir, run, key)
+        runs.append(run)
+        _write_outputs(out_dir, runs, list(methods), [p.name for p in seq_dirs], sim_dir,
+                       time.perf_counter() - t0)  # partial results survive an interruption
+        log.info("%s %s: RMSE %.4f m, loss %.2f %%", run.sequence, run.method, run.rmse_m, 100 * run.loss_ratio)
+        if on_run is not None:
+            on_run(run)
+
     if jobs <= 1:
-        for job in track(jobs_list, desc="daylight evaluation", enabled=progress, unit="run"):
-            runs.append(_run_job(job))
-            _write_outputs(out_dir, runs, list(methods), [p.name for p in seq_dirs], sim_dir,
-                           time.perf_counter() - t0)  # partial results survive an interruption
-            log.info("%s %s: RMSE %.4f m, loss %.2f %%", runs[-1].sequence, runs[-1].method, runs[-1].rmse_m,
-                     100 * runs[-1].loss_ratio)
-            if on_run is not None:
-                on_run(runs[-1])
-    else:
+        for job, key in track(todo, desc="daylight evaluation", enabled=progress, unit="run"):
+            finished(_run_job(job), key)
+    elif todo:
         import multiprocessing as mp
         from concurrent.futures import ProcessPoolExecutor
 
-        for scene in dict.fromkeys(json.loads((s / "sequence.json").read_text())["sequence"]["scene"]
-                                   for s in seq_dirs):
-            _lighting_map(scene, sim_dir, maps_dir, progress, map_config)  # prepare once, before the workers load it
         with ProcessPoolExecutor(max_workers=jobs, mp_context=mp.get_context("spawn")) as pool:
-            for run in track(pool.map(_run_job, jobs_list), desc="daylight evaluation", total=len(jobs_list),
-                             enabled=progress, unit="run"):
-                runs.append(run)
-                if on_run is not None:
-                    on_run(run)
+            done = pool.map(_run_job, [job for job, _ in todo])
+            for run, (_, key) in track(zip(done, todo, strict=True), desc="daylight evaluation", total=len(todo),
+                                       enabled=progress, unit="run"):
+                finished(run, key)
+    order = {(p.name, m): i for i, (p, m) in enumerate((p, m) for p in seq_dirs for m in methods)}
+    runs.sort(key=lambda r: order[(r.sequence, r.method)])
     _write_outputs(out_dir, runs, list(methods), [p.name for p in seq_dirs], sim_dir, time.perf_counter() - t0)
     return runs
+
+
+def _scene_of(seq_dir: Path) -> str:
+    return str(json.loads((seq_dir / "sequence.json").read_text())["sequence"]["scene"])
+
+
+def _run_key(seq_dir: Path, method: str, map_meta: dict, max_frames: int | None) -> str:
+    """A hash of everything that decides one run's outcome."""
+    import hashlib
+
+    _, reference, brightness = METHODS[method]
+    parts = {
+        "protocol": PROTOCOL_VERSION,
+        "recording": json.loads((seq_dir / "sequence.json").read_text()).get("params_hash"),
+        "map": {k: map_meta.get(k) for k in ("mesh_sha256", "config", "site", "format_version")},
+        "method": method,
+        "tracker": dataclasses.asdict(TrackerConfig(mode=METHODS[method][0])),
+        "relight": dataclasses.asdict(RelightConfig(reference=reference, method=brightness)),
+        "max_frames": max_frames,
+    }
+    return hashlib.sha256(json.dumps(parts, sort_keys=True, default=str).encode()).hexdigest()[:16]
+
+
+def _run_path(out_dir: Path, sequence: str, method: str) -> Path:
+    return out_dir / "runs" / f"{sequence}.{method}.json"
+
+
+def _save_run(out_dir: Path, run: SequenceRun, key: str) -> None:
+    doc = {"key": key, "sequence": run.sequence, "method": run.method,
+           "frames": [asdict(f) for f in run.frames],
+           "T_est": [np.round(T, 9).reshape(-1).tolist() for T in run.T_est],
+           "T_gt": [np.round(T, 9).reshape(-1).tolist() for T in run.T_gt]}
+    path = _run_path(out_dir, run.sequence, run.method)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    write_text_atomic(path, json.dumps(doc) + "\n")
+
+
+def _load_run(out_dir: Path, sequence: str, method: str, key: str) -> SequenceRun | None:
+    """The stored run if it exists and has ``key``; None otherwise (also for a damaged file: it is redone)."""
+    path = _run_path(out_dir, sequence, method)
+    try:
+        doc = json.loads(path.read_text())
+        if doc.get("key") != key:
+            return None
+        frames = [FrameRecord(**{k: tuple(v) if isinstance(v, list) else v for k, v in f.items()})
+                  for f in doc["frames"]]
+        return SequenceRun(sequence, method, frames, [np.array(T).reshape(4, 4) for T in doc["T_est"]],
+                           [np.array(T).reshape(4, 4) for T in doc["T_gt"]])
+    except FileNotFoundError:
+        return None
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        log.warning("%s is damaged (%s); running it again", path, exc)
+        return None
 
 
 def _write_outputs(out_dir: Path, runs: Sequence[SequenceRun], methods: list[str], sequences: list[str],

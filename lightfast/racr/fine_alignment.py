@@ -190,11 +190,6 @@ class FineAlignmentConfig(Config):
         1.345, description="Huber thresholds = this many robust std. deviations (MAD at the start) of each term, "
         "floored by photometric_huber / geometric_huber_m; 0 = the floors as fixed thresholds.", min=0.0,
     )
-    gradient_weight: float = param(
-        0.01, description="c of the gradient-dependent weight of every photometric residual (DSO's), "
-        "sqrt(c^2 / (c^2 + |grad D^u|^2 + |grad D^v|^2)) at its projections, image units per px; 0 = unweighted.",
-        min=0.0,
-    )
 
     def check(self) -> None:
         if self.correspondence_radius_m < self.geometric_huber_m:
@@ -308,23 +303,17 @@ def nearest_per_pixel(pixel: ArrayLike, depth: ArrayLike) -> NDArray[np.bool_]:
 
 class _Views:
     """The keyframes prepared for vectorised sampling: for each, the (blurred) intensity and its central-difference
-    gradient — with ``squared_gradient`` also the gradient of ``‖∇I‖²`` (for the Jacobian of the gradient-dependent
-    weight, :func:`_gradient_weight`) — all keyframes stacked into one ``(Σ H·W, 3 or 5)`` table, plus per-keyframe
-    intrinsics shaped ``(K, 1)``. Points are handled as ``(K, M, …)`` arrays: point ``m`` seen by keyframe ``k``."""
+    gradient, all keyframes stacked into one ``(Σ H·W, 3)`` table, plus per-keyframe intrinsics shaped ``(K, 1)``.
+    Points are handled as ``(K, M, …)`` arrays: point ``m`` seen by keyframe ``k``."""
 
-    def __init__(self, keyframes: Sequence[Keyframe], blur_px: float, border_px: float, *,
-                 squared_gradient: bool = False) -> None:
+    def __init__(self, keyframes: Sequence[Keyframe], blur_px: float, border_px: float) -> None:
         tables, offsets = [], [0]
         for kf in keyframes:
             img = kf.image
             if blur_px > 0.0:
                 img = cv2.GaussianBlur(img, (0, 0), blur_px, borderType=cv2.BORDER_REFLECT)
             gy, gx = np.gradient(img)
-            cols = [img, gx, gy]
-            if squared_gradient:
-                qy, qx = np.gradient(gx * gx + gy * gy)
-                cols += [qx, qy]
-            tables.append(np.stack(cols, axis=-1).reshape(-1, len(cols)))
+            tables.append(np.stack([img, gx, gy], axis=-1).reshape(-1, 3))
             offsets.append(offsets[-1] + img.size)
         self.table = np.ascontiguousarray(np.concatenate(tables), dtype=np.float64)
         cams = [kf.camera for kf in keyframes]
@@ -355,9 +344,8 @@ class _Views:
         return u, v, ok
 
     def sample(self, u: Array, v: Array) -> Array:
-        """Bilinear (I, ∂I/∂u, ∂I/∂v[, ∂‖∇I‖²/∂u, ∂‖∇I‖²/∂v]) ``(K, M, 3 or 5)`` at ``u, v`` ``(K, M)`` (clamped to
-        the image). In float64 on purpose: ``cv2.remap`` quantises sub-pixel positions to 1/32 px, making the
-        residuals piecewise constant."""
+        """Bilinear (I, ∂I/∂u, ∂I/∂v) ``(K, M, 3)`` at ``u, v`` ``(K, M)`` (clamped to the image). In float64 on
+        purpose: ``cv2.remap`` quantises sub-pixel positions to 1/32 px, making the residuals piecewise constant."""
         u = np.clip(u, 0.0, self.width - 1.000001)
         v = np.clip(v, 0.0, self.height - 1.000001)
         u0 = u.astype(np.intp)
@@ -365,8 +353,8 @@ class _Views:
         a = (u - u0)[..., None]
         b = (v - v0)[..., None]
         i = (self.offset + v0 * self.width + u0).ravel()
+        shape = u.shape + (3,)
         t = self.table
-        shape = u.shape + (t.shape[1],)
         t00, t01 = np.take(t, i, axis=0).reshape(shape), np.take(t, i + 1, axis=0).reshape(shape)
         i += np.repeat(self.width[:, 0], u.shape[1]) if u.ndim == 2 else self.width[:, 0]
         t10, t11 = np.take(t, i, axis=0).reshape(shape), np.take(t, i + 1, axis=0).reshape(shape)
@@ -407,22 +395,6 @@ def _huber_sqrt_weight(z: Array) -> Array:
     return np.where(a <= 1.0, 1.0, 1.0 / np.sqrt(np.maximum(a, 1e-300)))
 
 
-def _gradient_weight(
-    s: Array, ku: NDArray[np.intp], mu: NDArray[np.intp], kv: NDArray[np.intp], mv: NDArray[np.intp], c: float
-) -> Array | float:
-    """DSO's gradient-dependent weight of a photometric residual between the samples ``s[ku, mu]`` and
-    ``s[kv, mv]`` (``(K, M, 3)``: intensity, ∂I/∂u, ∂I/∂v): ``sqrt(c² / (c² + ‖∇I_u‖² + ‖∇I_v‖²))``, i.e. the
-    residual counted in units of its expected spread ``≈ ‖∇I‖ · misregistration``. Without it, a pose that moves
-    every projection off its edge (where a sub-pixel misregistration costs most) into flatter texture lowers the
-    cost — along the motions that a near-planar scene leaves photo-consistent (in-plane shift, scale about the
-    plane) the truth is then a local *maximum* of E_p (module notes). Treated as a constant in the Jacobians (as in
-    DSO), re-evaluated with every residual. ``c = 0``: 1 (unweighted)."""
-    if c <= 0.0:
-        return 1.0
-    g2 = s[ku, mu, 1] ** 2 + s[ku, mu, 2] ** 2 + s[kv, mv, 1] ** 2 + s[kv, mv, 2] ** 2
-    return c / np.sqrt(c * c + g2)
-
-
 def _huber_rho(z: Array) -> Array:
     a = np.abs(z)
     return np.where(a <= 1.0, 0.5 * z * z, a - 0.5)
@@ -449,19 +421,6 @@ def _select_by_gradient(c: Array, views: _Views, visible: NDArray[np.bool_], cou
     candidates = np.flatnonzero(visible.sum(axis=0) >= _MIN_KEYFRAMES)
     if 0 < count < len(candidates):
         candidates = candidates[np.argsort(-score[candidates], kind="stable")[:count]]
-    return np.sort(candidates)
-
-
-def _select_seen_twice(visible: NDArray[np.bool_], count: int, rng: np.random.Generator) -> NDArray[np.intp]:
-    """Indices of up to ``count`` points seen by ≥ 2 keyframes, a seeded random sample (all if ``count`` is 0).
-
-    For E_p, not by gradient strength at the starting estimate: points chosen for sitting on strong edges *there*
-    make the start a local minimum of the gradient-weighted E_p (and a local maximum of the unweighted one) along
-    the motions a near-planar scene leaves photo-consistent (module notes). The reference points are already
-    gradient-selected, by the reference VSE."""
-    candidates = np.flatnonzero(visible.sum(axis=0) >= _MIN_KEYFRAMES)
-    if 0 < count < len(candidates):
-        candidates = rng.choice(candidates, count, replace=False)
     return np.sort(candidates)
 
 
@@ -517,8 +476,7 @@ class _Problem:
         self.w_pho = np.ones(len(self.pu))
 
     def raw(self, R: Array, t: Array, sigma: float, cols: slice | None) -> tuple[Array, Array, Array, Array]:
-        """Geometric (m) and photometric (image units, gradient-weighted: :func:`_gradient_weight`) residuals and,
-        for ``cols`` of the 7, their Jacobians (including the derivative of the gradient weight)."""
+        """Geometric (m) and photometric (image units) residuals and, for ``cols`` of the 7, their Jacobians."""
         x = sigma * self.p_geo @ R.T + t
         r_g = np.einsum("ij,ij->i", x - self.q, self.n)
         Rt = np.einsum("ij,kjl->kil", R, self.R_K)
@@ -528,39 +486,24 @@ class _Problem:
         s = self.views.sample(u, v)
         pu, pv, pm = self.pu, self.pv, self.pm
         both = ok[pu, pm] & ok[pv, pm]
-        cw = self.config.gradient_weight
-        w = _gradient_weight(s, pu, pm, pv, pm, cw)
-        d_p = np.where(both, s[pu, pm, 0] - s[pv, pm, 0], 0.0)
-        r_p = d_p * w
+        r_p = np.where(both, s[pu, pm, 0] - s[pv, pm, 0], 0.0)
         if cols is None:
             return r_g, r_p, np.empty((0, 0)), np.empty((0, 0))
+        g = self.views.chain(c, s[..., 1:]) * ok[..., None]
         J_g = np.empty((len(r_g), 7))
-        if cols.start < 6:
-            J_g[:, :3] = np.cross(x - self.pivot_ref, self.n)
-            J_g[:, 3:6] = self.n
-        if cols.stop > 6:
-            J_g[:, 6] = sigma * np.einsum("ij,ij->i", (self.p_geo - self.pivot_cur) @ R.T, self.n)
-        Jk = self._chain_params(c, s[..., 1:3] * ok[..., None], Rt, sigma, cols)
-        J_p = (Jk[pu, pm] - Jk[pv, pm]) * w[:, None] if cw > 0.0 else Jk[pu, pm] - Jk[pv, pm]
-        if cw > 0.0:  # ∂w/∂x = −½ w / (c² + G) · ∂G/∂x with G = ‖∇I_u‖² + ‖∇I_v‖²
-            Jq = self._chain_params(c, s[..., 3:5] * ok[..., None], Rt, sigma, cols)
-            dw = -0.5 * w**3 / (cw * cw)  # = −½ w / (c² + G)
-            J_p += (d_p * dw)[:, None] * (Jq[pu, pm] + Jq[pv, pm])
-        return r_g, r_p, J_g[:, cols], J_p
-
-    def _chain_params(self, c: Array, grad: Array, Rt: Array, sigma: float, cols: slice) -> Array:
-        """``(K, M, n_cols)``: the derivative of an image quantity with pixel gradient ``grad`` ``(K, M, 2)``,
-        sampled at the projections of ``P_ref``, with respect to ``cols`` of the 7 parameters."""
-        g = self.views.chain(c, grad)
         Jk = np.empty(g.shape[:2] + (7,))
         if cols.start < 6:
             w = np.matmul(g, Rt.transpose(0, 2, 1))  # R̃ g: gradient w.r.t. the reference-frame point
             Jk[..., :3] = np.cross(w, self.P_ref - self.pivot_ref)
             Jk[..., 3:6] = -w
+            J_g[:, :3] = np.cross(x - self.pivot_ref, self.n)
+            J_g[:, 3:6] = self.n
         if cols.stop > 6:
             d = np.einsum("kji,kj->ki", self.R_K, self.t_K - self.pivot_cur)  # R_Kᵀ(t_K − pivot)
             Jk[..., 6] = -sigma * np.matmul(g, d[:, :, None])[..., 0]
-        return Jk[..., cols]
+            J_g[:, 6] = sigma * np.einsum("ij,ij->i", (self.p_geo - self.pivot_cur) @ R.T, self.n)
+        J_p = Jk[pu, pm, cols] - Jk[pv, pm, cols]
+        return r_g, r_p, J_g[:, cols], J_p
 
     def set_scales(self, delta_g: float, delta_p: float) -> None:
         """The Huber thresholds (and normalising scales) of the two terms."""
@@ -787,7 +730,7 @@ def fine_align(
     kfs = [Keyframe.coerce(k) for k in keyframes][-config.max_keyframes :]
     if len(kfs) < _MIN_KEYFRAMES:
         raise AlignmentError(f"fine alignment needs at least {_MIN_KEYFRAMES} keyframes, got {len(kfs)}")
-    views = _Views(kfs, config.image_blur_px, config.border_px, squared_gradient=config.gradient_weight > 0.0)
+    views = _Views(kfs, config.image_blur_px, config.border_px)
     R_K = np.stack([k.T_cur_cam[:3, :3] for k in kfs])
     t_K = np.stack([k.T_cur_cam[:3, 3] for k in kfs])
 
@@ -898,7 +841,7 @@ def _photometric_setup(
     tt = sigma * t_K @ R.T + t
     c = _camera_points(reference.points_m, Rt, tt)
     vis, occluded = views.visible(c, config.occlusion_cell_px)
-    sel = _select_seen_twice(vis, config.max_photometric_points, np.random.default_rng(config.seed))
+    sel = _select_by_gradient(c, views, vis, config.max_photometric_points)
     pairs = _pairs(vis[:, sel])
     if len(pairs[0]) < config.min_photometric_residuals:
         raise AlignmentError(

@@ -51,6 +51,21 @@ def test_evaluation_writes_table_csv_json_and_plots(sim_dir: Path, tmp_path: Pat
     # the proposed method estimated brightness: non-zero sun scale after the first frames
     assert max(runs[0].frames[-1].scale_sun) > 0
 
+    # resumable: the same call reuses both stored runs (identical results, nothing run again) ...
+    ran: list[str] = []
+    again = evaluate_daylight(sim_dir, out, methods=["proposed", "depth-only"], maps_dir=tmp_path / "maps",
+                              progress=False, map_config=MAP, on_run=lambda r: ran.append(r.method))
+    assert ran == [] and [r.frames for r in again] == [r.frames for r in runs]
+    np.testing.assert_allclose(np.array(again[0].T_est), np.array(runs[0].T_est))
+    # ... a run with another key (frame limit) or a damaged file is run again
+    (out / "runs" / "DS1.T6.depth-only.json").write_text("{not json")
+    evaluate_daylight(sim_dir, out, methods=["proposed", "depth-only"], maps_dir=tmp_path / "maps",
+                      progress=False, map_config=MAP, on_run=lambda r: ran.append(r.method))
+    assert ran == ["depth-only"]
+    short = evaluate_daylight(sim_dir, out, methods=["proposed"], maps_dir=tmp_path / "maps", max_frames=5,
+                              progress=False, map_config=MAP, on_run=lambda r: ran.append(r.method))
+    assert ran == ["depth-only", "proposed"] and len(short[0].frames) == 5
+
 
 def test_bad_inputs_are_clear_errors(sim_dir: Path, tmp_path: Path) -> None:
     with pytest.raises(EvalError, match="unknown method"):
