@@ -291,6 +291,16 @@ def test_se3_exp_matches_expm_and_log_round_trips(rho: np.ndarray, phi: np.ndarr
         np.testing.assert_allclose(back, xi, rtol=1e-10, atol=1e-12)
 
 
+def test_se3_exp_single_twist_path_equals_the_batched_one() -> None:
+    rng = np.random.default_rng(3)
+    xi = np.concatenate([rng.normal(size=(400, 6)) * s for s in (1e-5, 3e-3, 0.05, 1.0)])  # both coefficient branches
+    batched = g.se3_exp(xi)
+    single = np.stack([g.se3_exp(x) for x in xi])
+    np.testing.assert_allclose(single, batched, rtol=0, atol=1e-14)
+    with pytest.raises(g.GeometryError, match="non-finite"):
+        g.se3_exp(np.array([0.0, 0.0, np.nan, 0.0, 0.0, 0.0]))
+
+
 def test_se3_pure_translation_and_known_screw() -> None:
     T = g.se3_exp([1.0, 2.0, 3.0, 0.0, 0.0, 0.0])
     np.testing.assert_array_equal(T, g.make_transform(np.eye(3), [1.0, 2.0, 3.0]))
