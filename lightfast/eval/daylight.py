@@ -237,9 +237,15 @@ def _write_csv(path: Path, runs: Sequence[SequenceRun]) -> None:
     for run in runs:
         for i, f in enumerate(run.frames):
             row = asdict(f)
-            w.writerow([run.sequence, run.method, i, *[
-                " ".join(f"{v:.6g}" for v in row[k]) if isinstance(row[k], tuple) else row[k] for k in names]])
+            w.writerow([run.sequence, run.method, i, *[_csv_value(row[k]) for k in names]])
     write_text_atomic(path, buf.getvalue())
+
+
+def _csv_value(v: object) -> object:
+    """Six significant digits for floats (µm and µs are below what the evaluation resolves), tuples space-joined."""
+    if isinstance(v, tuple):
+        return " ".join(f"{x:.6g}" for x in v)
+    return f"{v:.6g}" if isinstance(v, float) else v
 
 
 def table_markdown(runs: Sequence[SequenceRun], methods: Sequence[str]) -> str:
