@@ -132,7 +132,7 @@ LABELS = {"racr": "rACR", "racr-serial": "rACR (serial)", "racr-p": "rACR-P", "r
           "racr-s": "rACR-S", "acr": "ACR"}
 LIGHTINGS = ("similar", "varied")
 ABLATION = ("racr", "racr-p", "racr-f", "racr-s")
-PROTOCOL_VERSION = 1
+PROTOCOL_VERSION = 2
 AFD_SUCCESS_PX = 3.0
 
 
@@ -240,7 +240,10 @@ def run_key(scene: str, lighting: str, method: str, repeat: int) -> str:
 
 
 def protocol_hash(config: RacrEvalConfig) -> str:
-    doc = {"version": PROTOCOL_VERSION, "config": config.to_dict()}
+    """The records' directory name: the protocol and the method's own default configuration (a changed default —
+    a new option of the alignments — gets new records instead of mixing with runs of the old method)."""
+    method = {c.__name__: c().to_dict() for c in (SchemeConfig, FastAlignmentConfig, FineAlignmentConfig)}
+    doc = {"version": PROTOCOL_VERSION, "config": config.to_dict(), "method": method}
     return hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()[:12]
 
 

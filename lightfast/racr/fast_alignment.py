@@ -42,6 +42,17 @@ Deviations from the paper, stated
   scene that misplaces points by 0.1–0.35 m, and a first kernel of 0.1 m (the earlier default) let the scale
   collapse into a shrunken, well-fitting but wrong minimum (σ_p 0.57–0.78 instead of 1.01, seen on the simulated
   scenes S01 and S19); 0.3 m converged to the right one on every scene tried.
+* **Matches weighted by distance on warm starts** (``match_gate``, off by default; the rACR scheme turns it on for
+  the alignment thread's warm starts, ``SchemeConfig.warm_match_gate``): at the final width each match's Tukey
+  weight is multiplied by a Tukey biweight of its nearest-neighbour distance, of ``match_gate`` × the median
+  distance of all matches — a width tied to the two clouds' own sampling and noise, not a fixed length (the
+  3DMatch clouds match at ~8 mm, the simulated ones at ~2.5 mm). A point-to-plane residual extrapolates the
+  reference point's tangent plane to the current point; where the reference has no point near it (two semi-dense
+  clouds seen under different lighting sit on different parts of a relief), that plane passes millimetres to
+  centimetres off the curved surface and the residual is a bias, not noise. Inside the 2 cm width those matches
+  slid the simulated S05 / S07 alignments 7.6 / 9.6 mm from the truth (0.5 / 2.7 mm with the weights). Narrowing
+  the Tukey width itself (to 3 × the residuals' robust spread) was tried instead and broke scene S02 and the
+  3DMatch tests; on cold starts the weights cut the far matches that lead to the solution, hence warm starts only.
 * A fixed random subset of ``max_points`` current points (seeded) forms the correspondences; the reference is
   used at full density. ``max_points=0`` uses every point.
 """
@@ -98,14 +109,14 @@ class FastAlignmentConfig(Config):
         min=1e-6
     )
     kernel_final_m: float = param(0.02, description="Tukey width k after annealing, m.", min=1e-6)
-    kernel_adaptive: float = param(
-        3.0, description="After converging at kernel_final_m, narrow k on to this many robust std. deviations "
-        "(1.4826 MAD) of the point-to-plane residuals of its inliers, not below kernel_min_m, and converge "
-        "again there; 0 = off.", min=0.0,
-    )
-    kernel_min_m: float = param(0.003, description="Floor of the adaptive Tukey width, m.", min=1e-6)
     kernel_decay: float = param(
         0.8, description="k <- max(k_final, decay * k) after every iteration.", min=0.01, max=1.0
+    )
+    match_gate: float = param(
+        0.0, description="At the final width, weight matches by a Tukey biweight of their nearest-neighbour distance "
+        "of this many times the median distance of all matches (gauss_newton solver): the reference's tangent plane "
+        "is not known far from its point; 0 = off (the rACR scheme turns it on for warm starts: "
+        "SchemeConfig.warm_match_gate).", min=0.0,
     )
     max_points: int = param(
         3000, description="Current points sampled (fixed random subset) for correspondences; 0 = all.", min=0
@@ -299,11 +310,14 @@ def _tukey(r: Array, k: float) -> Array:
     return np.where(u < 1.0, (1.0 - u * u) ** 2, 0.0)
 
 
-def _rigid_step_gauss_newton(x: Array, q: Array, n: Array, k: float) -> tuple[Array, Array, Array]:
+def _rigid_step_gauss_newton(
+    x: Array, q: Array, n: Array, k: float, w_match: Array | None = None
+) -> tuple[Array, Array, Array]:
     """One IRLS Gauss–Newton step of the robust point-to-plane cost: returns ``(dR, c, dt)`` with the update
-    ``x' = dR (x − c) + c + dt`` (left perturbation about the weighted centroid ``c`` of the matched points)."""
+    ``x' = dR (x − c) + c + dt`` (left perturbation about the weighted centroid ``c`` of the matched points).
+    ``w_match``: extra per-match weights (:func:`_match_weights`)."""
     r = np.einsum("ij,ij->i", x - q, n)
-    w = _tukey(r, k)
+    w = _tukey(r, k) if w_match is None else _tukey(r, k) * w_match
     W = float(w.sum())
     if not W > 0.0:
         raise AlignmentError("no correspondence has a residual inside the Tukey kernel")
@@ -328,7 +342,8 @@ def _rigid_step_gauss_newton(x: Array, q: Array, n: Array, k: float) -> tuple[Ar
 
 
 def _scale_step(
-    y: Array, q: Array, n: Array, t: Array, sigma: float, k: float, config: FastAlignmentConfig
+    y: Array, q: Array, n: Array, t: Array, sigma: float, k: float, config: FastAlignmentConfig,
+    w_match: Array | None = None,
 ) -> tuple[float, Array, Array]:
     """Eq. 15 with ``y = R_p p`` (rotated, unscaled current points) and ``x = σ y + t``: returns ``(σ', t', w)``."""
     x = sigma * y + t
@@ -336,6 +351,8 @@ def _scale_step(
         w = _tukey(np.einsum("ij,ij->i", x - q, n), k)
     else:
         w = _tukey(np.linalg.norm(x - q, axis=1), k)
+    if w_match is not None:
+        w = w * w_match
     W = float(w.sum())
     if not W > 0.0:
         raise AlignmentError("no correspondence is inside the Tukey kernel for the scale step")
@@ -355,21 +372,6 @@ def _scale_step(
         raise AlignmentError("Eq. 15 is undefined: the matched current points do not constrain the scale")
     sigma_new = num / den
     return sigma_new, t_pivot - sigma_new * c, w
-
-
-def _adaptive_kernel(d: Array, n: Array, w: Array, config: FastAlignmentConfig) -> float:
-    """The narrowed Tukey width: ``kernel_adaptive`` × 1.4826 × MAD of the point-to-plane residuals ``nᵀd`` of the
-    current inliers (``w > 0``), clipped to ``[kernel_min_m, kernel_final_m]``.
-
-    A fixed width well above the clouds' noise lets matches across the scene's small steps (relief edges, the rim
-    of a panel) pull on the pose: on near-planar reliefs under a lighting change — the two clouds' semi-dense
-    points sit on different parts of the relief — that slid the result 5–10 mm along the surface (simulated S05 and
-    S07: 7.6 and 9.6 mm camera error started at the truth, 0.3 and 2.4 mm with the adaptive width). Noisy real
-    clouds (cm noise) keep ``kernel_final_m``."""
-    r = np.abs(np.einsum("ij,ij->i", d[w > 0.0], n[w > 0.0]))
-    if len(r) == 0:
-        return config.kernel_final_m
-    return float(np.clip(config.kernel_adaptive * 1.4826 * np.median(r), config.kernel_min_m, config.kernel_final_m))
 
 
 def fast_align(
@@ -409,7 +411,6 @@ def fast_align(
     p = np.ascontiguousarray(p_all[_morton_order(p_all, config.kernel_final_m / max(sigma, 1e-12))])
 
     k = config.kernel_initial_m
-    k_final, adapted = config.kernel_final_m, config.kernel_adaptive <= 0.0 or config.kernel_initial_m > config.kernel_final_m  # adapted: the width is final
     converged = False
     pose_change = scale_change = float("inf")
     iterations = 0
@@ -422,16 +423,19 @@ def fast_align(
             _require(len(src), config, k)
             ref_idx = idx[src]
             q, n = reference.points_m[ref_idx], reference.normals[ref_idx]
-            dR, c, dt = _rigid_step_gauss_newton(x[src], q, n, k)
+            w_match = _match_weights(dist[src], config) if config.match_gate > 0.0 and k <= config.kernel_final_m \
+                else None
+            dR, c, dt = _rigid_step_gauss_newton(x[src], q, n, k, w_match)
             R = dR @ R
             t = dR @ (t - c) + c + dt
         else:
             R, t, src, ref_idx = _rigid_step_open3d(p, R, t, sigma, reference, k, config)
             _require(len(src), config, k)
             q, n = reference.points_m[ref_idx], reference.normals[ref_idx]
+            w_match = None
         R = project_to_so3(R)
         y = p[src] @ R.T
-        sigma, t, w = _scale_step(y, q, n, t, sigma, k, config)
+        sigma, t, w = _scale_step(y, q, n, t, sigma, k, config, w_match)
         if not (np.isfinite(sigma) and config.min_scale <= sigma <= config.max_scale):
             raise AlignmentError(
                 f"the scale diverged to sigma_p={sigma:.4g} at iteration {iterations} (bounds "
@@ -441,16 +445,10 @@ def fast_align(
         pose_change = float(np.sqrt(np.sum((dRot - np.eye(3)) ** 2) + np.sum((t - t_prev) ** 2)))
         scale_change = abs(sigma - sigma_prev)
         small = pose_change <= config.pose_tolerance and scale_change <= config.scale_tolerance
-        if small and k <= k_final and not adapted:  # narrow on while that shrinks the width by > 10 %
-            k_adapt = _adaptive_kernel(sigma * y + t - q, n, w, config)
-            adapted = k_adapt >= 0.9 * k_final
-            if k_adapt < k_final:
-                k_final = k_adapt
-                small = adapted
-        if small and k <= k_final:
+        if small and k <= config.kernel_final_m:
             converged = True
             break
-        k = max(k_final, k * config.kernel_decay)
+        k = max(config.kernel_final_m, k * config.kernel_decay)
 
     inlier = w > 0.0
     n_corr = int(np.count_nonzero(inlier))
@@ -531,6 +529,18 @@ def fast_align_best(
         raise first_error
     logger.debug("fast alignment: start %d of %d fits best (fitness %.3f)", best[1], len(starts), best[0].fitness)
     return best
+
+
+def _match_weights(dist: Array, config: FastAlignmentConfig) -> Array:
+    """Weights ``(1 − (d/g)²)²`` of the matches by their nearest-neighbour distance ``d``, with ``g`` =
+    ``match_gate`` × the median ``d`` of all matches.
+
+    The point-to-plane residual extrapolates the reference point's tangent plane to the current point; where the
+    reference has no point near it (the semi-dense clouds of two observations under different lighting sit on
+    different parts of a relief), that plane passes centimetres off a curved surface and the residual is a bias,
+    not noise: it slid the simulated S05 / S07 alignments 7–10 mm (0.5–2.5 mm with the weights)."""
+    u = dist / (config.match_gate * max(float(np.median(dist)), 1e-12))
+    return np.where(u < 1.0, (1.0 - u * u) ** 2, 0.0)
 
 
 def _require(count: int, config: FastAlignmentConfig, k: float) -> None:

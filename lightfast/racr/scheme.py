@@ -134,6 +134,11 @@ class SchemeConfig(Config):
     mode: str = param("parallel", description="parallel (the paper's rACR) or serial (Table 5's comparison).",
                       choices=SCHEME_MODES)
     fine_alignment: bool = param(True, description="Run the fine alignment after the fast one (False: rACR-F).")
+    warm_match_gate: float = param(
+        2.0, description="Warm-started fast alignments weight their matches by nearest-neighbour distance "
+        "(FastAlignmentConfig.match_gate; 0 = off). Not on cold starts: far from the solution it cut the matches "
+        "that lead there (simulated S05/S07 diverged).", min=0.0,
+    )
     platform_timeout_s: float = param(
         60.0, description="No stop reported this long after a motion was issued: stage platform_timeout, s.", min=0.0
     )
@@ -299,7 +304,8 @@ class RacrScheme:
                            (self.fine_config, FineAlignmentConfig), (self.adjustment_config, AdjustmentConfig)):
             if not isinstance(value, cls):
                 raise SchemeError(f"expected a {cls.__name__}, got {type(value).__name__}")
-        self._warm_config = replace(self.fast_config, kernel_initial_m=self.fast_config.kernel_final_m)
+        self._warm_config = replace(self.fast_config, kernel_initial_m=self.fast_config.kernel_final_m,
+                                    match_gate=self.config.warm_match_gate)
         self._reference = (
             reference if isinstance(reference, ReferenceCloud) else ReferenceCloud.from_config(reference,
                                                                                                 self.fast_config)

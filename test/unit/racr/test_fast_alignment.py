@@ -227,6 +227,41 @@ def test_a_single_plane_is_degenerate() -> None:
         fast_align(plane[:1500] + [0.0, 0.0, 0.005], plane)
 
 
+def test_match_gate_removes_the_bias_of_a_surface_the_reference_lacks() -> None:
+    """A raised 12 cm × 12 cm block (1 cm high) on a corrugated surface that the current cloud sees but the
+    reference lacks (as two semi-dense clouds under different lighting sit on different parts of a relief): its
+    points match the reference's base around it, whose tangent planes pass a centimetre off, and inside the 2 cm
+    Tukey width those residuals pull the whole estimate. Weighting the matches by their nearest-neighbour distance
+    (``match_gate``, the rACR scheme's warm starts) removes that. Measured from the true similarity: without
+    0.38 mm mean error of the base points / 0.17°, with 0.05 mm / 0.016°."""
+    rng = np.random.default_rng(0)
+
+    def surface(n: int) -> tuple[np.ndarray, np.ndarray]:
+        xy = rng.uniform(-0.2, 0.2, (n, 2))
+        z = 0.01 * np.sin(2 * np.pi * xy[:, 0] / 0.1) * np.sin(2 * np.pi * xy[:, 1] / 0.1)
+        block = (np.abs(xy[:, 0] - 0.1) < 0.06) & (np.abs(xy[:, 1] - 0.05) < 0.06)
+        return np.column_stack([xy, z]), block
+
+    ref_pts, ref_block = surface(60000)
+    reference = ReferenceCloud(ref_pts[~ref_block])
+    cur_true, block = surface(6000)
+    cur_true[block, 2] += 0.01
+    cur_true += rng.normal(scale=0.0005, size=cur_true.shape)
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3], sigma = so3_exp([0.2, -0.1, 0.3]), [0.3, -0.2, 0.1], 1.35
+    current = (cur_true - T[:3, 3]) @ T[:3, :3] / sigma
+    errors = []
+    for gate in (0.0, 2.0):
+        result = fast_align(current, reference, T_ref_cur_init=T, sigma_init=sigma,
+                            config=FastAlignmentConfig(kernel_initial_m=0.02, match_gate=gate))
+        assert result.converged
+        mm = 1e3 * np.linalg.norm(result.transform(current[~block]) - cur_true[~block], axis=1).mean()
+        errors.append((mm, rotation_angle_deg(result.T_ref_cur[:3, :3], T[:3, :3])))
+    (mm_plain, deg_plain), (mm_gated, deg_gated) = errors
+    assert mm_plain > 0.2 and deg_plain > 0.1  # the scenario biases the plain robust ICP
+    assert mm_gated < 0.1 and deg_gated < 0.04
+
+
 @pytest.mark.parametrize(
     ("kwargs", "match"),
     [

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import functools
 from dataclasses import dataclass
+from types import SimpleNamespace
 
 import cv2
 import numpy as np
@@ -341,6 +342,23 @@ def test_keyframe_refinement_eq16_matters_with_vse_pose_errors(noisy_keyframes, 
         after = rotation_angle_deg(with_eq16.T_cur_keyframes[k][:3, :3], truth[k][:3, :3])
         assert after < 0.6 * before
     np.testing.assert_allclose(without.T_cur_keyframes, np.stack([k.T_cur_cam for k in obs.keyframes]))
+
+
+def test_fine_alignment_started_at_the_truth_stays_there(scene, reference) -> None:
+    """Started at the true similarity (good cloud, exact keyframe poses, 320×240 px keyframes), the fine alignment
+    must not walk away. Unweighted pairwise residuals grow with the image gradient at their projections, and the
+    E_p points are the strongest-gradient ones at the start, so moving every projection off its edge into flatter
+    texture lowers E_p: the truth is not its minimum. DSO's gradient-dependent weight (``gradient_weight``)
+    removes that. Measured: weighted 1.5 mm / 0.10°, unweighted 2.6 mm / 0.19° (the simulated rACR scenes with
+    640×480 px keyframes: 0.5 mm vs 9 mm)."""
+    camera = PinholeCamera(320, 240, 280.0, 280.0, 159.5, 119.5)
+    obs = current_observation(scene, T_CUR_CAM, TRUE_T, TRUE_SIGMA, camera=camera, depth_noise_rel=0.005,
+                              gradient_quantile=0.85, seed=3)
+    truth = SimpleNamespace(T_ref_cur=obs.T_ref_cur, sigma=obs.sigma)
+    weighted = camera_error(_fine(obs, reference, truth), obs)
+    unweighted = camera_error(_fine(obs, reference, truth, gradient_weight=0.0), obs)
+    assert weighted[1] < 2.0 and weighted[0] < 0.14
+    assert unweighted[1] > 1.3 * weighted[1]  # what the weight removes
 
 
 def test_without_intensities_eq16_is_skipped(noisy_keyframes, reference) -> None:

@@ -339,3 +339,19 @@ def test_a_fast_alignment_cycling_between_nearly_equal_states_counts_as_settled(
         scheme._fast_history.append((7, np.eye(4), sigma))
     assert settled == [False, False, False, True]
     assert not scheme._settled(8, result(0.98885))  # another cloud: its own history
+
+
+def test_only_warm_starts_weight_matches_by_distance(scene, reference) -> None:
+    """``warm_match_gate`` goes into the warm-start configuration only: from the cold start's guess, several
+    degrees off, cutting far matches cut the ones that lead to the solution (simulated S05 / S07 diverged)."""
+    platform, vse = Platform(), Vse(scene)
+    scheme = RacrScheme(reference, T_REF_CAM, X_EST, config=SchemeConfig(fine_alignment=False))
+    vse.send(scheme, platform.T_ref_cam, None, cloud=True)
+    cold = scheme.next_alignment_job()
+    assert cold is not None and cold._fast_config.match_gate == 0.0
+    scheme.commit(cold.run())
+    vse.send(scheme, platform.T_ref_cam, None, cloud=True)
+    warm = scheme.next_alignment_job()
+    assert warm is not None and warm.kind == "fast"
+    assert warm._fast_config.match_gate == SchemeConfig().warm_match_gate > 0.0
+    assert warm._fast_config.kernel_initial_m == warm._fast_config.kernel_final_m
