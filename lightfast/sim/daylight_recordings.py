@@ -125,7 +125,7 @@ log = logging.getLogger(__name__)
 FORMAT_VERSION = 3  # 2: gaze angular rates limited (the look-at gaze whipped at up to 900°/s near targets);
 # 3: depth from the depth camera (time offset, registration error, projector shadow, correlated + systematic error)
 #: Bump when the reconstructed map of the same scene changes.
-MAP_FORMAT_VERSION = 3  # 2, 3: zero-area slivers (also after float32 rounding), non-manifold edges removed
+MAP_FORMAT_VERSION = 4  # 2, 3: zero-area slivers (also after float32 rounding), non-manifold edges removed; 4: planes
 #: Limits of the gaze's angular rates (before the hand jitter), like a person panning a hand-held camera.
 MAX_YAW_RATE_DEG_S = 75.0
 MAX_PITCH_RATE_DEG_S = 45.0
@@ -626,6 +626,7 @@ def generate_daylight_set(
     results: list[Path] = []
     scenes: dict[str, tuple[DaylightScene, dict[str, Path]]] = {}
     renderers: dict[str, GroundTruthRenderer] = {}
+    skipped_scenes: dict[str, float] = {}  # scenes of complete recordings: their files are still brought up to date
     for name in names:
         spec = _BY_NAME[name]
         res = resolution_m if resolution_m is not None else 0.02
@@ -642,6 +643,7 @@ def generate_daylight_set(
         if not force and _complete(seq_dir, digest):
             log.info("%s: complete, skipped", spec.name)
             results.append(seq_dir)
+            skipped_scenes.setdefault(spec.scene, res)
             continue
         if spec.scene not in scenes:
             kw = {"resolution_m": res}
@@ -660,6 +662,10 @@ def generate_daylight_set(
         log.info("%s: %d frames, cache %.1f s, %.0f ms/frame, exposure %.2f ms gain %.2f", spec.name, frames,
                  summary["seconds_cache"], summary["ms_per_frame"], 1e3 * summary["exposure_s"], summary["gain"])
         results.append(seq_dir)
+    for scene_name, res in skipped_scenes.items():
+        if scene_name not in scenes:  # the map (format, reconstruction settings) may have changed meanwhile
+            kw = {"resolution_m": res} if site is None else {"resolution_m": res, "site": site}
+            _scene_files(out, make_scene(scene_name, **kw), progress=progress)
     return results
 
 

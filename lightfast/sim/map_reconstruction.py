@@ -12,7 +12,14 @@ recordings come with a map made the same way:
    of a tracked scan (``pose_noise_m``, ``pose_noise_deg``).
 2. **Fusion**: Open3D's TSDF volume (``voxel_m``, truncation 4 voxels), marching-cubes mesh, fragments
    smaller than ``min_component_triangles`` removed.
-3. **Reflectance**: per reconstructed vertex, the true reflectance at the closest point of the true surface (the
+3. **Plane augmentation** (the paper: "we augmented the scene geometry by fitting large flat surfaces, such as
+   walls, ceiling, and floor, to planes"): planes are found one after another by RANSAC (Open3D's
+   ``segment_plane``, inliers within ``plane_distance_m``) among the vertices not yet taken; the inliers whose
+   normal agrees with the plane (within ``plane_normal_deg``) are projected onto it, as long as they cover at least
+   ``plane_min_area_m2``. Without it, the marching-cubes normals of a flat wall scatter by ~10°, and so do the
+   wall's direct sky and sun irradiance in the lighting map: a plain wall's relit reference gets a mottled
+   texture the live image lacks, which the photometric term of f2m then locks onto.
+4. **Reflectance**: per reconstructed vertex, the true reflectance at the closest point of the true surface (the
    ideal outcome of [4]), times a smooth multiplicative error (sum of random 3-D sinusoids, wavelengths 0.3–1.5 m,
    ``reflectance_error`` rms per channel: shading left in the recovered albedo) and a per-vertex error
    (``reflectance_noise`` rms), clipped to [0, 1].
@@ -34,7 +41,7 @@ from lightfast.raycast import RayCaster
 from lightfast.sim.daylight_scene import DaylightScene
 from lightfast.sim.gt_renderer import DepthSensor
 
-__all__ = ["ReconstructionSettings", "reconstruct_map", "scan_poses"]
+__all__ = ["ReconstructionSettings", "fit_planes", "reconstruct_map", "scan_poses"]
 
 F64 = NDArray[np.float64]
 _MIN_AREA_M2 = 1e-10  # 0.0001 mm²: safely above zero after float32 rounding
@@ -55,6 +62,10 @@ class ReconstructionSettings:
     pose_noise_m: float = 0.003
     pose_noise_deg: float = 0.2
     min_component_triangles: int = 200
+    max_planes: int = 16
+    plane_distance_m: float = 0.02
+    plane_normal_deg: float = 45.0
+    plane_min_area_m2: float = 0.5
     reflectance_error: float = 0.06
     reflectance_noise: float = 0.02
     seed: int = 0
@@ -97,6 +108,44 @@ def _perturbed(T: F64, rng: np.random.Generator, settings: ReconstructionSetting
     E[:3, :3] = so3_exp(rng.normal(0.0, math.radians(settings.pose_noise_deg), 3))
     E[:3, 3] = rng.normal(0.0, settings.pose_noise_m, 3)
     return T @ E
+
+
+def fit_planes(vertices: F64, faces: NDArray[np.int64], settings: ReconstructionSettings) -> F64:
+    """Step 3 of the module docstring: ``vertices`` with those of large flat surfaces projected onto their planes."""
+    import open3d as o3d
+
+    cfg = settings
+    out = vertices.copy()
+    fn = np.cross(vertices[faces[:, 1]] - vertices[faces[:, 0]], vertices[faces[:, 2]] - vertices[faces[:, 0]])
+    vn = np.zeros_like(vertices)
+    for k in range(3):  # area-weighted vertex normals
+        np.add.at(vn, faces[:, k], fn)
+    vn /= np.maximum(np.linalg.norm(vn, axis=1, keepdims=True), 1e-300)
+    min_vertices = int(cfg.plane_min_area_m2 / cfg.voxel_m**2)  # marching cubes: about one vertex per voxel face
+    min_cos = math.cos(math.radians(cfg.plane_normal_deg))
+    o3d.utility.random.seed(cfg.seed)
+    left = np.arange(len(vertices))
+    planes = 0
+    for _ in range(2 * cfg.max_planes):  # attempts: a plane's leftovers (its edge vertices) may come back once
+        if planes >= cfg.max_planes or len(left) < max(min_vertices, 3):
+            break
+        cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(vertices[left]))
+        plane, inliers = cloud.segment_plane(distance_threshold=cfg.plane_distance_m, ransac_n=3,
+                                             num_iterations=1000)
+        n = np.asarray(plane[:3], dtype=np.float64)
+        n /= np.linalg.norm(n)
+        inliers = left[np.asarray(inliers, dtype=np.int64)]
+        members = inliers[np.abs(vn[inliers] @ n) >= min_cos]  # not the edges of other surfaces crossing it
+        if len(members) < min_vertices:  # the largest plane left is small: only leftovers remain there
+            left = np.setdiff1d(left, inliers, assume_unique=True)
+            continue
+        # least-squares plane of the members (RANSAC's is through three of them)
+        centre = vertices[members].mean(axis=0)
+        n = np.linalg.svd(vertices[members] - centre, full_matrices=False)[2][2]
+        out[members] -= ((out[members] - centre) @ n)[:, None] * n
+        left = np.setdiff1d(left, members, assume_unique=True)
+        planes += 1
+    return out
 
 
 def _smooth_field(points: F64, rng: np.random.Generator, n_waves: int = 12) -> F64:
@@ -166,8 +215,9 @@ def reconstruct_map(scene: DaylightScene, settings: ReconstructionSettings | Non
     mesh.remove_triangles_by_mask(counts[clusters] < cfg.min_component_triangles)
     mesh.remove_degenerate_triangles()
     mesh.remove_non_manifold_edges()
-    v = np.asarray(mesh.vertices).astype(np.float32).astype(np.float64)  # as a PLY file holds them
     f = np.asarray(mesh.triangles, dtype=np.int64)  # counter-clockwise seen from the free side, as ours
+    v = fit_planes(np.asarray(mesh.vertices, dtype=np.float64), f, cfg)
+    v = v.astype(np.float32).astype(np.float64)  # as a PLY file holds them
     area = 0.5 * np.linalg.norm(np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), axis=1)
     f = f[area > _MIN_AREA_M2]  # marching cubes makes slivers of zero area where the surface grazes a voxel corner
     used = np.unique(f)

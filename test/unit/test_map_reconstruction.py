@@ -52,3 +52,41 @@ def test_scene_files_reconstruct_once(tmp_path) -> None:  # noqa: ANN001
     stamp = first["map"].stat().st_mtime_ns
     again = _scene_files(tmp_path, scene)
     assert again == first and again["map"].stat().st_mtime_ns == stamp  # cached: no second scan
+
+
+def test_large_flat_surfaces_are_fitted_to_planes_small_ones_left() -> None:
+    from lightfast.sim.map_reconstruction import fit_planes
+
+    rng = np.random.default_rng(4)
+
+    def grid(n: int, size: float, origin: np.ndarray, ax_u: int, ax_v: int) -> tuple[np.ndarray, np.ndarray]:
+        u = np.linspace(0.0, size, n + 1)
+        uu, vv = np.meshgrid(u, u, indexing="ij")
+        v = np.tile(origin.astype(np.float64), (uu.size, 1))
+        v[:, ax_u] += uu.ravel()
+        v[:, ax_v] += vv.ravel()
+        i = np.arange(n)[:, None] * (n + 1) + np.arange(n)[None, :]
+        a, b, c, d = i.ravel(), i.ravel() + 1, i.ravel() + n + 1, i.ravel() + n + 2
+        return v, np.concatenate([np.stack([a, c, b], 1), np.stack([b, c, d], 1)])
+
+    floor_v, floor_f = grid(60, 1.2, np.array([0.0, 0.0, 0.0]), 0, 1)  # 1.44 m², normal z
+    wall_v, wall_f = grid(60, 1.2, np.array([0.0, 1.25, 0.0]), 0, 2)  # 1.44 m², normal y
+    small_v, small_f = grid(10, 0.2, np.array([0.4, 0.4, 0.3]), 0, 1)  # a 0.04 m² shelf above the floor
+    parts = [(floor_v, floor_f, 2), (wall_v, wall_f, 1), (small_v, small_f, 2)]
+    vs, fs, offset = [], [], 0
+    for v, f, axis in parts:
+        v = v.copy()
+        v[:, axis] += 0.003 * rng.normal(size=len(v))  # reconstruction noise across the surface
+        vs.append(v)
+        fs.append(f + offset)
+        offset += len(v)
+    vertices, faces = np.concatenate(vs), np.concatenate(fs)
+    out = fit_planes(vertices, faces, ReconstructionSettings(voxel_m=0.02, plane_min_area_m2=0.5))
+    n_floor, n_wall = len(floor_v), len(wall_v)
+    floor, wall, small = out[:n_floor], out[n_floor:n_floor + n_wall], out[n_floor + n_wall:]
+    for part, axis in ((floor, 2), (wall, 1)):
+        inner = part[4:-4]  # away from the shared corner, where the normal test may leave vertices unsnapped
+        assert np.std(inner[:, axis]) < 0.1 * 0.003  # flattened ...
+        assert abs(np.mean(inner[:, axis]) - np.mean(vertices[:len(part)][:, axis] if axis == 2 else
+                                                     vertices[n_floor:n_floor + n_wall][:, axis])) < 0.002
+    np.testing.assert_array_equal(small, vertices[n_floor + n_wall:])  # ... the small surface is left as it was
