@@ -64,7 +64,7 @@ METHODS: dict[str, tuple[str, str, str]] = {
     "no-color-f2m": ("no-color-f2m", "relit", "crf"),
 }
 #: Bump when the protocol or the method changes in a way the run key does not see (stored runs are then redone).
-PROTOCOL_VERSION = 2
+PROTOCOL_VERSION = 3
 LOSS_TRANSLATION_M = 0.10
 LOSS_ROTATION_DEG = 10.0
 

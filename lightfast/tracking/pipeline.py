@@ -64,7 +64,7 @@ class TrackerConfig(TrackingConfig):
         "frame-to-model step, which always runs down to finest_level.", min=0, max=5
     )
     f2m_iterations: tuple[int, ...] = param(
-        (10, 5, 3), description="Gauss-Newton iterations per level of the f2m step, coarse to fine (it starts at "
+        (10, 5, 5), description="Gauss-Newton iterations per level of the f2m step, coarse to fine (it starts at "
         "T≈, close to the solution).", min=1, max=200
     )
     motion_prior: str = param("constant-velocity", description="Start of the f2f alignment: the previous frame's "

@@ -608,9 +608,12 @@ def align_frames(
     """:func:`align` on frames prepared once by :func:`prepare_frame` (a live frame serves as the f2f source,
     then as the f2f target of the next frame, and as the f2m source against the reference).
 
-    The target may be rendered at half the source's resolution (a reference at ``reference_scale`` 0.5): pyramid
-    level ``k`` of the source is aligned to level ``k`` of the target, projecting the source's points with the
-    target's intrinsics."""
+    The target may be rendered at half the source's resolution (a reference at ``reference_scale`` 0.5): then
+    source level ``k ≥ 1`` is aligned to target level ``k − 1``, of the same resolution, and the full-resolution
+    source level to the half-resolution target level 0, projecting the source's points with the target's
+    intrinsics. (Pairing level ``k`` with level ``k`` instead started the alignment on a quarter-size target whose
+    coarsest level, 40×30 for a 320×240 camera, left a plain room corner unconstrained: f2m started at the truth
+    walked 0.4–0.8 m away on the simulated DS2.)"""
     cfg = TrackingConfig() if config is None else config
     color, depth = _resolve_terms(cfg, use_color, use_depth)
     init = _check_init(init_T_target_source)
@@ -623,7 +626,10 @@ def align_frames(
     if target.camera not in (source.camera, source.camera.scaled(0.5)):
         raise TrackingError(f"the target camera must be the source camera or the source camera at half resolution: "
                             f"source {source.camera}, target {target.camera}")
-    return _align_pyramids(source.levels, target.levels, init, cfg, color, depth)
+    levels = target.levels
+    if target.camera != source.camera:  # half resolution: same-size levels together
+        levels = (levels[0], *levels[:-1])
+    return _align_pyramids(source.levels, levels, init, cfg, color, depth)
 
 
 def track_sequence(
