@@ -79,13 +79,15 @@ def build_patches(
     directions = fibonacci_sphere(normal_bins)
     _, normal_bin = cKDTree(directions).query(fn)
     cell = np.floor((fc - fc.min(axis=0)) / patch_size_m).astype(np.int64)
-    _, face_cell = np.unique(cell, axis=0, return_inverse=True)
-    node_keys, face_node = np.unique(np.stack([face_cell.reshape(-1), normal_bin], axis=1), axis=0,
-                                     return_inverse=True)
+    # (normal bin, cell) nodes, in the order of these keys: patches keep it (a map whose faces need no merge gets
+    # exactly the patches, and the patch order, of plain binning)
+    keys = np.stack([normal_bin, cell[:, 0], cell[:, 1], cell[:, 2]], axis=1)
+    node_keys, face_node = np.unique(keys, axis=0, return_inverse=True)
     face_node = face_node.reshape(-1)
     if normal_merge_deg > 0.0:
+        _, node_cell = np.unique(node_keys[:, 1:], axis=0, return_inverse=True)
         node_area = np.bincount(face_node, weights=fa, minlength=len(node_keys))
-        node_region = _merge_bins(node_keys[:, 0], directions[node_keys[:, 1]], node_area,
+        node_region = _merge_bins(node_cell.reshape(-1), directions[node_keys[:, 0]], node_area,
                                   math.cos(math.radians(normal_merge_deg)), min_area=0.1 * patch_size_m**2)
         _, face_patch = np.unique(node_region[face_node], return_inverse=True)
     else:
