@@ -367,7 +367,8 @@ def evaluate_daylight(sim_dir: Path, out_dir: Path, *, methods: Sequence[str] = 
     cfg_dict = None if map_config is None else dataclasses.asdict(map_config)
     map_meta = {}
     for scene in dict.fromkeys(_scene_of(s) for s in seq_dirs):
-        _lighting_map(scene, sim_dir, maps_dir, progress, map_config)  # prepare once, before the workers load it
+        if not (maps_dir / scene).exists():  # prepare once, before the workers load (and check) it
+            _lighting_map(scene, sim_dir, maps_dir, progress, map_config)
         map_meta[scene] = json.loads((maps_dir / scene / "metadata.json").read_text())
     runs: list[SequenceRun] = []
     todo = []
