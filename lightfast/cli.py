@@ -154,6 +154,7 @@ def _cmd_daylight_prepare(args: argparse.Namespace) -> int:
     from lightfast.config import config_from_mapping
     from lightfast.daylight.lighting_map import LightingMapConfig, prepare_lighting_map
     from lightfast.daylight.mesh import load_ply
+    from lightfast.daylight.openings import load_openings
     from lightfast.daylight.sun import Site
 
     overrides = {k: v for k, v in (("patch_size_m", args.patch_size), ("normal_merge_deg", args.normal_merge),
@@ -163,8 +164,9 @@ def _cmd_daylight_prepare(args: argparse.Namespace) -> int:
     config = config_from_mapping(LightingMapConfig, overrides)
     mesh = load_ply(args.mesh)
     site = Site.from_yaml(args.site)
+    openings = load_openings(args.openings) if args.openings else None
     start = time.monotonic()
-    lmap = prepare_lighting_map(mesh, site, config, progress=sys.stderr.isatty())
+    lmap = prepare_lighting_map(mesh, site, config, openings=openings, progress=sys.stderr.isatty())
     path = lmap.save(args.out, overwrite=args.overwrite)
     size_mb = sum(p.stat().st_size for p in Path(path).iterdir()) / 1e6
     print(f"wrote {path}: {mesh.num_vertices} vertices, {lmap.patches.count} patches, {size_mb:.1f} MB, "
@@ -304,6 +306,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--sky-directions", type=int, help="directional lights over the sphere (default 2048)")
     p.add_argument("--sun-samples", type=int, help="directions inside the solar disk (default 8)")
     p.add_argument("--iterations", type=int, help="Jacobi iterations of Eq. 2 (default: until converged)")
+    p.add_argument("--openings", help="YAML of the room's window openings: outdoor light then enters only through "
+                   "them, not through holes of a reconstructed mesh (format: lightfast.daylight.openings)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing map")
     p.set_defaults(func=_cmd_daylight_prepare)
     p = daylight_sub.add_parser("sun", help="sun position at a site and time")

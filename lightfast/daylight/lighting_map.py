@@ -21,8 +21,8 @@ import json
 import logging
 import os
 import zipfile
-from collections.abc import Callable
-from dataclasses import dataclass
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
 
@@ -33,6 +33,7 @@ from numpy.typing import NDArray
 from lightfast.config import Config, ConfigError, config_from_mapping, param
 from lightfast.daylight.lights import LightSet, sky_and_ground, sun_disk
 from lightfast.daylight.mesh import MeshError, ReflectanceMesh, load_ply, save_ply
+from lightfast.daylight.openings import Opening, openings_array
 from lightfast.daylight.patches import Patches, build_patches
 from lightfast.daylight.radiosity import PatchTransport, direct_irradiance, vertex_radiosity
 from lightfast.daylight.sun import Site
@@ -88,6 +89,9 @@ class LightingMap:
     transport_source: PatchTransport | Callable[[], PatchTransport]  # the transport, or how to build it on demand
     sky_radiosity: NDArray[np.float32]  # (V, 3) B̂_sky
     ground_radiosity: NDArray[np.float32]  # (V, 3) B̂_grd
+    #: (N, 3, 3) window openings (corner, edge u, edge v; :mod:`lightfast.daylight.openings`); none: every ray
+    #: that leaves the mesh brings outdoor light
+    openings: NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 3, 3)))
 
     def __post_init__(self) -> None:
         _ = self.mesh.vertex_normals  # computed once here, not inside the first bounded sun-update step
@@ -127,6 +131,7 @@ class LightingMap:
             "coverage": self.transport.coverage,
             "sky_radiosity": self.sky_radiosity.astype(np.float32),
             "ground_radiosity": self.ground_radiosity.astype(np.float32),
+            "openings": np.asarray(self.openings, dtype=np.float64).reshape(-1, 3, 3),
         }
         for name, mat in (("vertex_to_patch", p.vertex_to_patch), ("patch_to_vertex", p.patch_to_vertex)):
             csr = sp.csr_matrix(mat)
@@ -139,7 +144,8 @@ class LightingMap:
             "version": FORMAT_VERSION,
             "mesh_sha256": self.mesh.content_hash,
             "created_utc": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
-            "counts": {"vertices": self.mesh.num_vertices, "faces": self.mesh.num_faces, "patches": p.count},
+            "counts": {"vertices": self.mesh.num_vertices, "faces": self.mesh.num_faces, "patches": p.count,
+                       "openings": int(len(self.openings))},
             "config": self.config.to_dict(),
             "site": self.site.to_dict(),
         }
@@ -229,16 +235,18 @@ class LightingMap:
             visible = np.unpackbits(bits, count=P * P).reshape(P, P).astype(bool)
             return PatchTransport.from_visibility(patches, visible, coverage)
 
-        return cls(mesh, site, config, patches, transport, a["sky_radiosity"], a["ground_radiosity"])
+        openings = openings_array(a["openings"]) if "openings" in a else np.zeros((0, 3, 3))
+        return cls(mesh, site, config, patches, transport, a["sky_radiosity"], a["ground_radiosity"], openings)
 
 
 def _direct_in_chunks(mesh: ReflectanceMesh, caster: RayCaster, lights: LightSet, config: LightingMapConfig,
-                      *, desc: str, progress: bool) -> NDArray[np.float64]:
+                      openings: NDArray[np.float64], *, desc: str, progress: bool) -> NDArray[np.float64]:
     out = np.empty(mesh.num_vertices)
     starts = range(0, mesh.num_vertices, config.vertex_chunk)
     for s in track(starts, desc=desc, total=len(starts), enabled=progress, unit="chunk"):
         sl = slice(s, min(mesh.num_vertices, s + config.vertex_chunk))
-        out[sl] = direct_irradiance(mesh, caster, lights, vertices=sl, offset_m=config.ray_offset_m)
+        out[sl] = direct_irradiance(mesh, caster, lights, vertices=sl, offset_m=config.ray_offset_m,
+                                    openings=openings)
     return out
 
 
@@ -247,10 +255,13 @@ def prepare_lighting_map(
     site: Site,
     config: LightingMapConfig | None = None,
     *,
+    openings: Sequence[Opening] | None = None,
     progress: bool = False,
 ) -> LightingMap:
-    """Build the lighting map of ``mesh`` at ``site``: patches, transport, B̂_sky and B̂_grd."""
+    """Build the lighting map of ``mesh`` at ``site``: patches, transport, B̂_sky and B̂_grd. With ``openings``
+    (the room's windows), light enters only through them (see :mod:`lightfast.daylight.openings`)."""
     config = config or LightingMapConfig()
+    windows = openings_array(openings)
     try:
         mesh.validate_topology()
     except MeshError as exc:
@@ -259,12 +270,12 @@ def prepare_lighting_map(
     patches = build_patches(mesh, patch_size_m=config.patch_size_m, normal_merge_deg=config.normal_merge_deg)
     log.info("%d vertices, %d faces, %d patches", mesh.num_vertices, mesh.num_faces, patches.count)
     transport = PatchTransport.compute(patches, caster, hemisphere_rays=config.hemisphere_rays,
-                                       offset_m=config.ray_offset_m, progress=progress)
+                                       offset_m=config.ray_offset_m, progress=progress, openings=windows)
     sky, ground = sky_and_ground(config.sky_directions, up=tuple(UP))
-    direct = np.stack([_direct_in_chunks(mesh, caster, lights, config, desc=f"{lights.name} light", progress=progress)
+    direct = np.stack([_direct_in_chunks(mesh, caster, lights, config, windows, desc=f"{lights.name} light", progress=progress)
                        for lights in (sky, ground)], axis=1)
     both = vertex_radiosity(mesh, patches, transport, direct, iterations=config.iterations or None)
     lmap = LightingMap(mesh, site, config, patches, transport, both[:, 0].astype(np.float32),
-                       both[:, 1].astype(np.float32))
+                       both[:, 1].astype(np.float32), windows)
     lmap.__dict__["caster"] = caster  # reuse the BVH just built
     return lmap

@@ -36,6 +36,7 @@ from numpy.typing import NDArray
 
 from lightfast.daylight.lights import LightSet
 from lightfast.daylight.mesh import ReflectanceMesh
+from lightfast.daylight.openings import through_openings
 from lightfast.daylight.patches import Patches
 from lightfast.errors import LightfastError
 from lightfast.progress import track
@@ -56,8 +57,12 @@ def direct_irradiance(
     vertices: slice = slice(None),
     offset_m: float = 1e-3,
     max_rays: int = 1 << 21,
+    openings: NDArray[np.float64] | None = None,
 ) -> NDArray[np.float64]:
-    """Eq. 1 without ρ: the direct irradiance ``E⁰`` of the vertices in ``vertices`` under ``lights``."""
+    """Eq. 1 without ρ: the direct irradiance ``E⁰`` of the vertices in ``vertices`` under ``lights``.
+
+    ``openings`` (N, 3, 3), see :mod:`lightfast.daylight.openings`: when given (N > 0), a ray that escapes the mesh
+    brings light only if it crosses one of them."""
     points = mesh.vertices_m[vertices]
     normals = mesh.vertex_normals[vertices]
     out = np.zeros(len(points))
@@ -74,6 +79,9 @@ def direct_irradiance(
             continue
         origins = points[start + vi] + offset_m * n[vi]
         blocked = caster.occluded(origins, d[li], t_near_m=0.0)
+        if openings is not None and len(openings):
+            free = np.flatnonzero(~blocked)
+            blocked[free] = ~through_openings(origins[free], d[li[free]], openings)
         contrib = np.where(blocked, 0.0, w[li] * cos[vi, li])
         out[start : start + block] += np.bincount(vi, weights=contrib, minlength=len(n))
     return out
@@ -115,8 +123,10 @@ class PatchTransport:
         seed: int = 0,
         progress: bool = False,
         max_rays: int = 1 << 21,
+        openings: NDArray[np.float64] | None = None,
     ) -> PatchTransport:
-        """Trace the visibility of every facing patch pair (one ray each) and each patch's hemisphere coverage."""
+        """Trace the visibility of every facing patch pair (one ray each) and each patch's hemisphere coverage
+        (with ``openings``, a ray that escapes elsewhere than through one counts as covered)."""
         P = patches.count
         pts = patches.sample_point_m + offset_m * patches.normal
         visible = np.zeros((P, P), dtype=bool)
@@ -136,17 +146,21 @@ class PatchTransport:
             blocked = caster.occluded(pts[p_idx], dvec, t_far_m=np.maximum(dist - 2 * offset_m, 0.0))
             visible[p_idx[~blocked], q_idx[~blocked]] = True
         visible |= visible.T
-        coverage = cls._coverage(patches, caster, hemisphere_rays, offset_m, seed)
+        coverage = cls._coverage(patches, caster, hemisphere_rays, offset_m, seed, openings)
         return cls.from_visibility(patches, visible, coverage)
 
     @staticmethod
-    def _coverage(patches: Patches, caster: RayCaster, n: int, offset_m: float, seed: int) -> NDArray[np.float64]:
+    def _coverage(patches: Patches, caster: RayCaster, n: int, offset_m: float, seed: int,
+                  openings: NDArray[np.float64] | None = None) -> NDArray[np.float64]:
         if n <= 0:
             return np.ones(patches.count)
         rng = np.random.default_rng(seed)
         dirs = _cosine_hemisphere(patches.normal, n, rng)  # (P, n, 3)
         origins = np.broadcast_to((patches.sample_point_m + offset_m * patches.normal)[:, None, :], dirs.shape)
-        hits = caster.intersect(origins, dirs).hit
+        hits = caster.intersect(origins, dirs).hit.copy()
+        if openings is not None and len(openings):
+            esc = ~hits
+            hits[esc] = ~through_openings(origins[esc], dirs[esc], openings)
         return hits.mean(axis=1)
 
     @classmethod

@@ -96,7 +96,7 @@ class SunUpdate:
             sl = self._blocks[self._index]
             if self.sun_visible:
                 e = direct_irradiance(lmap.mesh, lmap.caster, self.lights, vertices=sl,
-                                      offset_m=lmap.config.ray_offset_m)
+                                      offset_m=lmap.config.ray_offset_m, openings=lmap.openings)
                 self._direct[sl] = e
                 self._patch_direct += lmap.patches.vertex_to_patch[:, sl] @ e
             self._index += 1

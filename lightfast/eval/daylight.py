@@ -211,18 +211,24 @@ def _lighting_map(scene: str, sim_dir: Path, maps_dir: Path, progress: bool,
     """The scene's lighting map, prepared once into ``maps_dir/<scene>`` (reused while the mesh is unchanged)."""
     from lightfast.daylight.lighting_map import prepare_lighting_map
     from lightfast.daylight.mesh import load_ply
+    from lightfast.daylight.openings import load_openings, openings_array
     from lightfast.daylight.sun import Site
 
     out = maps_dir / scene
     mesh_path, site_path = sim_dir / "scenes" / f"{scene}.map.ply", sim_dir / "scenes" / f"{scene}.site.yaml"
+    openings_path = sim_dir / "scenes" / f"{scene}.openings.yaml"
+    openings = load_openings(openings_path) if openings_path.exists() else ()
     if out.exists():
         lmap = LightingMap.load(out)
         if lmap.mesh.content_hash != load_ply(mesh_path).content_hash:
             raise EvalError(f"{out} was prepared for another {scene} mesh; remove it to prepare it again")
+        if not np.array_equal(lmap.openings, openings_array(openings)):
+            raise EvalError(f"{out} was prepared with other window openings than {openings_path}; remove it to "
+                            "prepare it again")
         return lmap
     log.info("preparing the lighting map of %s into %s", scene, out)
     lmap = prepare_lighting_map(load_ply(mesh_path), Site.from_yaml(site_path), config or LightingMapConfig(),
-                                progress=progress)
+                                openings=openings, progress=progress)
     lmap.save(out)
     return lmap
 

@@ -36,6 +36,8 @@ trajectory maps to a normalized exposure of 0.18, so sunlit areas saturate.
 Output of :func:`generate_daylight_set` in ``OUT``::
 
     scenes/DS1.ply, DS1.site.yaml, DS1.json   the true scene mesh (linear RGB reflectance) and site, shared
+    scenes/DS1.openings.yaml        the window's opening as a user would measure it (outer rectangle + 2 cm); give
+                                    it to ``lightfast daylight prepare --openings``
     scenes/DS1.map.ply              the method's map: a TSDF reconstruction of a simulated night-time depth scan
                                     with recovered reflectance (:mod:`lightfast.sim.map_reconstruction`, as the
                                     paper's maps were made, §IV-A); give this one to ``lightfast daylight prepare``
@@ -76,11 +78,12 @@ from scipy.interpolate import PchipInterpolator
 
 from lightfast.camera import PinholeCamera
 from lightfast.daylight.mesh import save_ply
+from lightfast.daylight.openings import OpeningsError, load_openings, save_openings
 from lightfast.daylight.sun import Site, sun_position
 from lightfast.geometry import inverse, se3_exp, se3_log
 from lightfast.io import write_text_atomic
 from lightfast.progress import track
-from lightfast.sim.daylight_scene import DaylightScene, make_scene
+from lightfast.sim.daylight_scene import DaylightScene, make_scene, window_opening
 from lightfast.sim.gt_renderer import (
     CacheSettings,
     CameraResponse,
@@ -588,7 +591,15 @@ def _scene_files(out: Path, scene: DaylightScene, *, progress: bool = False) -> 
         log.info("%s: reconstructing the method's map from a simulated depth scan", scene.name)
         save_ply(reconstruct_map(scene, recon, progress=progress), map_path)
         write_text_atomic(meta_path, json.dumps(meta, indent=1) + "\n")
-    return {"mesh": mesh_path, "site": site_path, "map": map_path}
+    openings_path = d / f"{scene.name}.openings.yaml"
+    openings = (window_opening(scene.window),)
+    try:
+        current = load_openings(openings_path)
+    except OpeningsError:
+        current = ()
+    if current != openings:
+        save_openings(openings_path, openings)
+    return {"mesh": mesh_path, "site": site_path, "map": map_path, "openings": openings_path}
 
 
 def generate_daylight_set(

@@ -36,6 +36,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from lightfast.daylight.mesh import ReflectanceMesh, merge_meshes
+from lightfast.daylight.openings import Opening
 from lightfast.daylight.sun import FREIBURG, Site
 
 __all__ = [
@@ -47,6 +48,7 @@ __all__ = [
     "WindowGeometry",
     "make_ds1",
     "make_ds2",
+    "window_opening",
     "make_scene",
 ]
 
@@ -99,6 +101,16 @@ class WindowGeometry:
         """Signed distance (m) of points to the glass plane, positive outside (towards ``normal``)."""
         c = np.array(self.center_m) - self.glass_depth_m * np.array(self.normal)
         return (np.asarray(points_m) - c) @ np.array(self.normal)
+
+
+def window_opening(window: WindowGeometry, *, margin_m: float = 0.02) -> Opening:
+    """The window as the user of the method declares it (:mod:`lightfast.daylight.openings`): its outer rectangle,
+    ``margin_m`` larger on every side (a tape-measure tolerance; the reveals block the rays that cross the margin)."""
+    c, u, v = np.array(window.center_m), np.array(window.axis_u), np.array(window.axis_v)
+    hu, hv = window.half_u_m + margin_m, window.half_v_m + margin_m
+    corner = c - hu * u - hv * v
+    return Opening(tuple(float(x) for x in corner), tuple(float(x) for x in 2 * hu * u),  # type: ignore[arg-type]
+                   tuple(float(x) for x in 2 * hv * v), name="window")  # type: ignore[arg-type]
 
 
 @dataclass(frozen=True)
