@@ -145,7 +145,7 @@ class LightingMap:
             "mesh_sha256": self.mesh.content_hash,
             "created_utc": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
             "counts": {"vertices": self.mesh.num_vertices, "faces": self.mesh.num_faces, "patches": p.count,
-                       "openings": int(len(self.openings))},
+                       "openings": len(self.openings)},
             "config": self.config.to_dict(),
             "site": self.site.to_dict(),
         }
@@ -272,7 +272,8 @@ def prepare_lighting_map(
     transport = PatchTransport.compute(patches, caster, hemisphere_rays=config.hemisphere_rays,
                                        offset_m=config.ray_offset_m, progress=progress, openings=windows)
     sky, ground = sky_and_ground(config.sky_directions, up=tuple(UP))
-    direct = np.stack([_direct_in_chunks(mesh, caster, lights, config, windows, desc=f"{lights.name} light", progress=progress)
+    direct = np.stack([_direct_in_chunks(mesh, caster, lights, config, windows, desc=f"{lights.name} light",
+                                         progress=progress)
                        for lights in (sky, ground)], axis=1)
     both = vertex_radiosity(mesh, patches, transport, direct, iterations=config.iterations or None)
     lmap = LightingMap(mesh, site, config, patches, transport, both[:, 0].astype(np.float32),

@@ -97,7 +97,8 @@ def through_openings(origins_m: NDArray[np.floating], directions: NDArray[np.flo
             # coordinates in the (eu, ev) basis of the plane
             g = np.array([[eu @ eu, eu @ ev], [eu @ ev, ev @ ev]])
             ab = np.linalg.solve(g, np.stack([p @ eu, p @ ev]))
-        out |= (np.abs(denom) > 1e-12) & (t > -_PLANE_TOLERANCE_M) & (ab[0] >= 0) & (ab[0] <= 1) & (ab[1] >= 0) & (ab[1] <= 1)
+        inside = (ab[0] >= 0) & (ab[0] <= 1) & (ab[1] >= 0) & (ab[1] <= 1)
+        out |= (np.abs(denom) > 1e-12) & (t > -_PLANE_TOLERANCE_M) & inside
     return out
 
 

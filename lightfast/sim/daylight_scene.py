@@ -48,8 +48,8 @@ __all__ = [
     "WindowGeometry",
     "make_ds1",
     "make_ds2",
-    "window_opening",
     "make_scene",
+    "window_opening",
 ]
 
 #: Room extent (x, y, z) in metres, like the paper's test room.

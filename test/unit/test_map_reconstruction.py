@@ -7,7 +7,7 @@ from lightfast.sim.daylight_scene import make_ds2
 from lightfast.sim.map_reconstruction import ReconstructionSettings, reconstruct_map, scan_poses
 
 
-def _closest(mesh, points):  # noqa: ANN001, ANN202
+def _closest(mesh, points):
     import open3d as o3d
 
     scene = o3d.t.geometry.RaycastingScene()
@@ -44,7 +44,7 @@ def test_reconstructed_map_is_near_the_true_surface_but_not_it() -> None:
     assert 0.01 < np.median(rel) < 0.15
 
 
-def test_scene_files_reconstruct_once(tmp_path) -> None:  # noqa: ANN001
+def test_scene_files_reconstruct_once(tmp_path) -> None:
     from lightfast.sim.daylight_recordings import _scene_files
 
     scene = make_ds2(resolution_m=0.3)
