@@ -73,8 +73,8 @@ def in_process(size: str, frames: int, out: Path, mode: str, tracker_params: dic
     from lightfast.tracking.pipeline import TrackerConfig
 
     sim = out / f"daylight-sim-{size}-{frames}-0.04"
-    map_ply = sim / "scenes" / "DS1.map.ply"
-    lmap = LightingMap.load(sim / "maps" / f"DS1-0.1-{hashlib.sha1(map_ply.read_bytes()).hexdigest()[:12]}")
+    scene_files = (sim / "scenes" / "DS1.map.ply").read_bytes() + (sim / "scenes" / "DS1.openings.yaml").read_bytes()
+    lmap = LightingMap.load(sim / "maps" / f"DS1-0.1-{hashlib.sha1(scene_files).hexdigest()[:12]}")  # as demo.sh
     cfg = TrackerConfig(**tracker_params)
     cpu0, wall0 = time.process_time(), time.monotonic()
     run = run_sequence(sim / "DS1.T6", lmap, mode, progress=False, tracker_config=cfg)

@@ -44,11 +44,14 @@ mkdir -p "$out"
 echo "== recording $sequence ($frames frames, $size) in $sim (reused when complete)"
 "$lf" sim daylight "$sim" --sequences "$sequence" --frames "$frames" --size "$size" --resolution "$resolution"
 # the method's map is the simulator's reconstruction of a depth scan (scenes/<scene>.map.ply), never the true mesh
+# with the window declared (scenes/<scene>.openings.yaml), so that light enters only through it
 map_ply="$sim/scenes/$scene.map.ply"
-map="$sim/maps/$scene-$patch_size-$(sha1sum "$map_ply" | cut -c1-12)"
+openings="$sim/scenes/$scene.openings.yaml"
+map="$sim/maps/$scene-$patch_size-$(cat "$map_ply" "$openings" | sha1sum | cut -c1-12)"
 if [ ! -f "$map/metadata.json" ]; then
   echo "== preparing the lighting map of $scene in $map"
-  "$lf" daylight prepare "$map_ply" "$sim/scenes/$scene.site.yaml" "$map" --patch-size "$patch_size"
+  "$lf" daylight prepare "$map_ply" "$sim/scenes/$scene.site.yaml" "$map" --patch-size "$patch_size" \
+    --openings "$openings"
 fi
 initial_pose=$("$lf" bag pose "$seq_dir/bag")  # the evaluation protocol's known start pose
 
