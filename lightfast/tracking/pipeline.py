@@ -67,6 +67,15 @@ class TrackerConfig(TrackingConfig):
         (10, 5, 5), description="Gauss-Newton iterations per level of the f2m step, coarse to fine (it starts at "
         "T≈, close to the solution).", min=1, max=200
     )
+    pose_prior_weight: float = param(
+        0.3, description="f2f: weight per associated pixel of a prior at the constant-velocity prediction (per m^2 and "
+        "rad^2, Eq. 7 cost units; 0 = off). Views of a plain wall leave directions Eq. 7 does not constrain; without "
+        "the prior f2f drifts there by cm per frame.", min=0.0,
+    )
+    f2m_pose_prior_weight: float = param(
+        0.0, description="pose_prior_weight of the f2m step (its prior is at T≈; 0 = off: f2m corrects T≈ freely).",
+        min=0.0,
+    )
     motion_prior: str = param("constant-velocity", description="Start of the f2f alignment: the previous frame's "
                               "relative motion (constant velocity) or identity (none).",
                               choices=("constant-velocity", "none"))
@@ -160,8 +169,9 @@ class F2MJob:
         try:
             ref = prepare_frame(self.ref_rgb, self.ref_depth_m, self.ref_camera, config=cfg,
                                 name=f"reference {self.stamp_ns}")
-            self.result = align_frames(self.source, ref, config=dataclasses.replace(cfg, iterations=cfg.f2m_iterations),
-                                       use_color=cfg.f2m_color, use_depth=True)
+            f2m_cfg = dataclasses.replace(cfg, iterations=cfg.f2m_iterations,
+                                          pose_prior_weight=cfg.f2m_pose_prior_weight)
+            self.result = align_frames(self.source, ref, config=f2m_cfg, use_color=cfg.f2m_color, use_depth=True)
         except TrackingError as exc:
             if "no valid depth" not in str(exc):
                 self.error = exc

@@ -123,8 +123,10 @@ def final_status(probe: Probe, i: int) -> tuple[Level, str, dict[str, str]]:
 
 
 def test_missing_reference_gives_the_f2f_pose_and_says_so(start_nodes, scene: Scene) -> None:
+    # f2f poses are final here: Eq. 7 alone (the f2f prior at the constant-velocity prediction holds back ~6 mm
+    # of this tiny, low-texture scene's first motions started at identity; test_rgbd_odometry covers the prior)
     _, _, probe = start_nodes({"initial_pose": pose7(scene.poses[0]), "reference_timeout_s": 0.2,
-                               "mode": "no-color-f2m"})
+                               "mode": "no-color-f2m", "pose_prior_weight": 0.0})
     probe.publish("info", camera_info_from_camera(scene.camera, frame_id=OPTICAL_FRAME))
     for i in range(3):  # colour first, then depth first (as 16UC1 millimetres)
         send_frame(probe, scene, i, depth_first=bool(i % 2), millimetres=bool(i % 2))
@@ -170,7 +172,8 @@ def test_reference_refines_the_coarse_pose(start_nodes, scene: Scene) -> None:
 
 
 def test_bad_input_is_reported_and_tracking_resumes(start_nodes, scene: Scene) -> None:
-    tracker, _, probe = start_nodes({"initial_pose": pose7(scene.poses[0]), "reference_timeout_s": 0.05})
+    tracker, _, probe = start_nodes({"initial_pose": pose7(scene.poses[0]), "reference_timeout_s": 0.05,
+                                     "pose_prior_weight": 0.0})  # f2f poses are final: Eq. 7 alone (see above)
     rgb, depth = scene.frames[0]
 
     def problem(text: str) -> str:
