@@ -84,7 +84,8 @@ def openings_array(openings: Sequence[Opening] | ArrayLike | None) -> NDArray[np
 
 def through_openings(origins_m: NDArray[np.floating], directions: NDArray[np.floating],
                      openings: NDArray[np.float64]) -> NDArray[np.bool_]:
-    """Whether each ray ``origin + t·direction`` (t > -1 mm) crosses any of ``openings`` (N, 3, 3); (M,) bool."""
+    """Whether each ray ``origin + t·direction`` (unit ``directions``, t > -1 mm) crosses any of ``openings``
+    (N, 3, 3); (M,) bool."""
     o = np.asarray(origins_m, dtype=np.float64)
     d = np.asarray(directions, dtype=np.float64)
     out = np.zeros(len(d), dtype=bool)
