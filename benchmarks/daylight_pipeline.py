@@ -79,8 +79,8 @@ def in_process(size: str, frames: int, out: Path, mode: str, tracker_params: dic
     cpu0, wall0 = time.process_time(), time.monotonic()
     run = run_sequence(sim / "DS1.T6", lmap, mode, progress=False, tracker_config=cfg)
     cpu, wall = time.process_time() - cpu0, time.monotonic() - wall0
-    st = {k: float(np.median([getattr(f, k) for f in run.frames[5:]]))
-          for k in ("f2f_ms", "render_ms", "estimate_ms", "f2m_ms")}
+    st = {f"{k}_ms": float(np.median([getattr(f, f"ms_{k}") for f in run.frames[5:]]))
+          for k in ("f2f", "render", "estimate", "f2m")}
     return {"size": size, "frames": len(run.frames), "cpu_ms_per_frame": 1e3 * cpu / len(run.frames),
             "wall_ms_per_frame": 1e3 * wall / len(run.frames), "stages_median_ms": st, "tracker_params": tracker_params}
 
