@@ -301,6 +301,20 @@ def test_se3_exp_single_twist_path_equals_the_batched_one() -> None:
         g.se3_exp(np.array([0.0, 0.0, np.nan, 0.0, 0.0, 0.0]))
 
 
+def test_se3_log_single_matrix_path_equals_the_batched_one() -> None:
+    rng = np.random.default_rng(4)
+    xi = np.concatenate([rng.normal(size=(400, 6)) * s for s in (1e-5, 3e-3, 0.05, 1.0)])  # both series branches
+    xi = xi[np.linalg.norm(xi[:, 3:], axis=1) < 3.0]  # away from pi, where phi and -phi are the same rotation
+    T = g.se3_exp(xi)
+    batched = g.se3_log(T)
+    single = np.stack([g.se3_log(t) for t in T])
+    np.testing.assert_allclose(single, batched, rtol=0, atol=1e-13)
+    bad = T[0].copy()
+    bad[0, 0] += 1e-3
+    with pytest.raises(g.GeometryError, match="not a rotation matrix"):
+        g.se3_log(bad)
+
+
 def test_se3_pure_translation_and_known_screw() -> None:
     T = g.se3_exp([1.0, 2.0, 3.0, 0.0, 0.0, 0.0])
     np.testing.assert_array_equal(T, g.make_transform(np.eye(3), [1.0, 2.0, 3.0]))
