@@ -69,8 +69,9 @@ from lightfast.topics import (
 NODE_NAME = "daylight_relight_node"
 #: Images and coarse poses waiting for their partner (per side): about a second of frames at 30 Hz.
 MAX_UNPAIRED = 30
-#: Paired frames waiting for the relighter; when it falls behind the oldest are dropped (the tracker gave up on them).
-MAX_QUEUED = 4
+#: Paired frames waiting for the relighter; when it falls behind the oldest are dropped: their references would come
+#: after the tracker's deadline, so rendering them would only delay the references of the newer frames.
+MAX_QUEUED = 2
 #: The chunk stream must not lose a chunk, or its epoch never completes.
 CHUNK_QOS = QoSProfile(depth=200, reliability=ReliabilityPolicy.RELIABLE)
 CHUNK_FIELDS = ("vertex", "r", "g", "b")
@@ -83,6 +84,7 @@ class _Frame:
     rgb: np.ndarray
     frame_id: str
     T_map_cam: np.ndarray
+    pose_latency_ms: float  # node clock when the coarse pose came, minus the image stamp
 
 
 class DaylightRelightNode(Node):
@@ -101,7 +103,7 @@ class DaylightRelightNode(Node):
         self.problems = ProblemLog(self._log)
 
         self._lock = threading.Lock()  # guards everything the input callbacks share with the worker
-        self._pairs: ExactTimePairs[tuple[np.ndarray, str], np.ndarray] = ExactTimePairs(MAX_UNPAIRED)
+        self._pairs: ExactTimePairs[tuple[np.ndarray, str], tuple[np.ndarray, float]] = ExactTimePairs(MAX_UNPAIRED)
         self._queue: deque[_Frame] = deque()
         self._camera: PinholeCamera | None = None
         self._new_sun: tuple[np.ndarray, int] | None = None
@@ -197,16 +199,17 @@ class DaylightRelightNode(Node):
         except ConversionError as exc:
             self._problem("pose", f"dropped coarse pose on {COARSE_POSE_TOPIC}: {exc}")
             return
+        latency_ms = 1e-6 * (self._now_ns() - stamp)
         with self._lock:
             self.stats["poses_in"] += 1
-            self._enqueue(stamp, self._pairs.add_second(stamp, T))
+            self._enqueue(stamp, self._pairs.add_second(stamp, (T, latency_ms)))
 
-    def _enqueue(self, stamp: int, pair: tuple[tuple[np.ndarray, str], np.ndarray] | None) -> None:
+    def _enqueue(self, stamp: int, pair: tuple[tuple[np.ndarray, str], tuple[np.ndarray, float]] | None) -> None:
         self.stats["dropped_unpaired"] = self._pairs.dropped
         if pair is None:
             return
-        (rgb, frame_id), T = pair
-        self._queue.append(_Frame(stamp, rgb, frame_id, T))
+        (rgb, frame_id), (T, latency_ms) = pair
+        self._queue.append(_Frame(stamp, rgb, frame_id, T, latency_ms))
         while len(self._queue) > MAX_QUEUED:
             self._queue.popleft()
             self.stats["dropped_behind"] += 1
@@ -303,6 +306,8 @@ class DaylightRelightNode(Node):
             "frame_scales_used": ref.frame_scales is not None,
             **{f"{k}_ms": 1e3 * v for k, v in ref.seconds.items()},
             "total_ms": 1e3 * (time.perf_counter() - t0),
+            "pose_latency_ms": f.pose_latency_ms,  # image stamp -> coarse pose here (tracker f2f + transport)
+            "latency_ms": 1e-6 * (self._now_ns() - stamp),  # image stamp -> reference published
         }
         self._publish_status(Level.OK, "reference published", stamp_ns=stamp)
 

@@ -60,7 +60,8 @@ source "$(dirname "${BASH_SOURCE[0]}")/processes.sh"
 logs="$out/demo-logs"
 mkdir -p "$logs"
 echo "== starting the nodes (domain $ROS_DOMAIN_ID, logs in $logs)"
-"$bin/sun_update_node" --ros-args -p use_sim_time:=true -p lighting_map:="$map" -p update_period_s:="$sun_period" \
+# the sun update is a background job (its chunks are used once an epoch is complete): it yields the CPU to tracking
+nice -n 19 "$bin/sun_update_node" --ros-args -p use_sim_time:=true -p lighting_map:="$map" -p update_period_s:="$sun_period" \
   -p patches_per_step:=2000 >"$logs/sun_update_node.log" 2>&1 &
 pids+=($!)
 "$bin/daylight_relight_node" --ros-args -p use_sim_time:=true -p lighting_map:="$map" \
@@ -85,11 +86,31 @@ pids+=($recorder)
 for _ in $(seq 600); do grep -q "patches; site" "$logs/sun_update_node.log" && break; sleep 0.5; done
 # the clock runs $preroll s before the first frame: time for the first sun update epoch to stream in
 echo "== playing $seq_dir/bag at rate $rate with /clock ($preroll s preroll)"
-"$lf" bag play "$seq_dir/bag" --rate "$rate" --clock --preroll "$preroll" --wait-for-subscribers 120 \
-  --topics /camera/color/image_raw /camera/color/camera_info /camera/depth/image_raw
+children_cpu_seconds
+player_before=$children_cpu
+"$lf" -v bag play "$seq_dir/bag" --rate "$rate" --clock --preroll "$preroll" --wait-for-subscribers 120 \
+  --topics /camera/color/image_raw /camera/color/camera_info /camera/depth/image_raw 2>"$logs/player.log" &
+player=$!
+pids+=($player)
+# each process's CPU time from the first frame on (the player waits for its subscribers, then runs the preroll)
+names=(sun_update_node daylight_relight_node rgbd_tracker_node recorder)
+cpu_before=()
+for _ in $(seq 3000); do
+  grep -q "playing from bag time" "$logs/player.log" 2>/dev/null || ! kill -0 "$player" 2>/dev/null && break
+  sleep 0.05
+done
+for pid in "${pids[@]:0:4}"; do cpu_before+=("$(cpu_seconds "$pid")"); done
+wait "$player"
 sleep 2  # the last frames' poses
+cpu_line="CPU seconds from the first frame on:"
+for i in "${!names[@]}"; do
+  cpu_line+=" ${names[$i]} $(awk -v a="${cpu_before[$i]}" -v b="$(cpu_seconds "${pids[$i]}")" 'BEGIN {printf "%.1f", b - a}'),"
+done
+children_cpu_seconds
+cpu_line+=" player $(awk -v a="$player_before" -v b="$children_cpu" 'BEGIN {printf "%.1f", b - a}') (with its preroll)"
 
 kill -INT "$recorder"
 wait "$recorder" || true
 echo "== result ($mode)"
 "$lf" eval recording "$recorded" --truth "$seq_dir/bag"
+echo "$cpu_line"

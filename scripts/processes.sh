@@ -13,3 +13,17 @@ cleanup() {
 }
 trap cleanup EXIT
 trap 'echo "interrupted"; exit 130' INT TERM
+cpu_seconds() {  # cpu_seconds PID: user + system CPU seconds the process has used so far (0 if it is gone)
+  local stat
+  stat=$(cat "/proc/$1/stat" 2>/dev/null) || { echo 0; return; }
+  stat=${stat##*) }  # the fields after "pid (comm) "; utime and stime are the 12th and 13th of them
+  awk -v hz="$(getconf CLK_TCK)" '{printf "%.2f", ($12 + $13) / hz}' <<<"$stat"
+}
+children_cpu_seconds() {  # sets children_cpu to the CPU seconds of this shell's waited-for children (bash `times`)
+  local f  # call it directly, not in $(...) or a pipe: a subshell would report its own (no) children
+  f=$(mktemp)
+  times >"$f"
+  children_cpu=$(tail -1 "$f" | awk '{n = 0; for (i = 1; i <= 2; i++) {split($i, a, /[ms]/); n += a[1] * 60 + a[2]}
+                                      printf "%.2f", n}')
+  rm -f "$f"
+}

@@ -167,6 +167,7 @@ def _play(reader: BagReader, node: Node, options: PlayOptions, stop: threading.E
                 if loops == 1 and options.preroll_s > 0 and clock.publisher is not None:
                     _preroll(clock, first_ns, options, stop)
                     wall0 = time.monotonic()
+                log.info("playing from bag time %d (loop %d)", first_ns, loops)
                 clock.publish(first_ns)
             if options.rate > 0:
                 target = wall0 + (msg.log_time_ns - first_ns) * 1e-9 / options.rate

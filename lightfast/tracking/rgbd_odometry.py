@@ -342,9 +342,7 @@ def _prepare(rgb: ArrayLike, depth_m: ArrayLike, camera: PinholeCamera, cfg: Tra
                 f"image too small for {cfg.pyramid_levels} pyramid levels: level {level} is {grey.shape}"
             )
         geometry = _geometry_map(depth, cam.fx, cam.fy, cam.cx, cam.cy)
-        valid = depth > 0
-        if level == 0 and cfg.finest_point_step > 1:
-            valid = valid & _subsample_mask(depth.shape, cfg.finest_point_step)
+        points, point_grey = _source_points(geometry, grey, cfg.finest_point_step if level == 0 else 1)
         gu = cv2.Sobel(grey, cv2.CV_32F, 1, 0, ksize=3, borderType=cv2.BORDER_REPLICATE) * np.float32(0.125)
         gv = cv2.Sobel(grey, cv2.CV_32F, 0, 1, ksize=3, borderType=cv2.BORDER_REPLICATE) * np.float32(0.125)
         levels.append(
@@ -352,8 +350,8 @@ def _prepare(rgb: ArrayLike, depth_m: ArrayLike, camera: PinholeCamera, cfg: Tra
                 camera=cam,
                 grey=grey,
                 depth=depth,
-                points=geometry[valid][:, 1:4],
-                point_grey=grey[valid],
+                points=points,
+                point_grey=point_grey,
                 grey_grad=np.ascontiguousarray(np.stack([grey, gu, gv], axis=-1)),
                 geometry=geometry,
             )
@@ -361,10 +359,29 @@ def _prepare(rgb: ArrayLike, depth_m: ArrayLike, camera: PinholeCamera, cfg: Tra
     return RGBDFrame(tuple(levels), camera, cfg.pyramid_levels, cfg.resolution_scale)
 
 
-def _subsample_mask(shape: tuple[int, ...], step: int) -> NDArray[np.bool_]:
-    """Pixels kept as source points: a checkerboard for ``step`` 2, every second row and column for 4."""
-    v, u = np.indices(shape[:2])
-    return ((u + v) % 2 == 0) if step == 2 else ((u % 2 == 0) & (v % 2 == 0))
+@numba.njit(cache=True, nogil=True)
+def _source_points(geometry: NDArray[np.float32], grey: NDArray[np.float32], step: int
+                   ) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
+    """Vertices (N, 3) and grey values (N,) of the pixels with depth, row-major; of every pixel (``step`` 1), a
+    checkerboard (2) or every second row and column (4)."""
+    h, w = grey.shape
+    n = 0
+    for i in range(h):
+        for j in range(w):
+            if geometry[i, j, 0] > 0.0 and (step == 1 or (step == 2 and (i + j) % 2 == 0)
+                                            or (step == 4 and i % 2 == 0 and j % 2 == 0)):
+                n += 1
+    points = np.empty((n, 3), dtype=np.float32)
+    point_grey = np.empty(n, dtype=np.float32)
+    k = 0
+    for i in range(h):
+        for j in range(w):
+            if geometry[i, j, 0] > 0.0 and (step == 1 or (step == 2 and (i + j) % 2 == 0)
+                                            or (step == 4 and i % 2 == 0 and j % 2 == 0)):
+                points[k, 0], points[k, 1], points[k, 2] = geometry[i, j, 1], geometry[i, j, 2], geometry[i, j, 3]
+                point_grey[k] = grey[i, j]
+                k += 1
+    return points, point_grey
 
 
 def prepare_frame(
