@@ -12,8 +12,9 @@ brightness scales ``/relight/scale/{sun,sky,ground}`` (Vector3Stamped, x=r, y=g,
 
 Threading: the subscription callbacks only convert and buffer; the relighting runs in a guard-condition callback
 of its own mutually exclusive callback group (one frame per call), which also applies a completed B̂_sun and
-parameter changes, so nothing mutates the relighter while it renders. Under a single-threaded executor the chunk
-subscription is served between frames; under a multi-threaded one it runs beside them.
+parameter changes, so nothing mutates the relighter while it renders. The node spins a two-thread executor, so the
+inputs are taken while a frame renders: under a single-threaded one they waited in the DDS history behind each
+frame, and at 30 Hz the coarse poses reached the node ~230 ms late (a standing queue), past the tracker's deadline.
 """
 from __future__ import annotations
 
@@ -322,7 +323,7 @@ class DaylightRelightNode(Node):
 
 
 def main(args: list[str] | None = None) -> int:
-    return run_node(DaylightRelightNode, NODE_NAME, args)
+    return run_node(DaylightRelightNode, NODE_NAME, args, num_threads=2)
 
 
 if __name__ == "__main__":
