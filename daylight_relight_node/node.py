@@ -10,11 +10,12 @@ complete epoch no reference is published. For each pair it publishes, with the i
 brightness scales ``/relight/scale/{sun,sky,ground}`` (Vector3Stamped, x=r, y=g, z=b) and ``/relight/status``
 (DiagnosticArray: sun epoch, chunk progress, pixels used, stage timings).
 
-Threading: the subscription callbacks only convert and buffer; the relighting runs in a guard-condition callback
-of its own mutually exclusive callback group (one frame per call), which also applies a completed B̂_sun and
-parameter changes, so nothing mutates the relighter while it renders. The node spins a two-thread executor, so the
-inputs are taken while a frame renders: under a single-threaded one they waited in the DDS history behind each
-frame, and at 30 Hz the coarse poses reached the node ~230 ms late (a standing queue), past the tracker's deadline.
+Threading: the executor's callbacks only convert and buffer, then wake a worker thread that relights the queued
+frames one at a time and also applies a completed B̂_sun and parameter changes, so nothing mutates the relighter
+while it renders, and the inputs are taken while a frame renders. (With the relighting in an executor callback the
+inputs waited in the DDS history behind each frame: at 30 Hz the coarse poses reached the node ~230 ms late, past
+the tracker's deadline. rclpy's MultiThreadedExecutor fixed that but spent a third of the process's CPU on its own
+bookkeeping; a plain thread, as in ``rgbd_tracker_node``, costs nothing while it waits.)
 """
 from __future__ import annotations
 
@@ -28,7 +29,6 @@ from typing import Any
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, Vector3, Vector3Stamped
-from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import CameraInfo, Image, PointCloud2
@@ -41,8 +41,8 @@ from lightfast.daylight.relight import DaylightRelighter, Reference, RelightConf
 from lightfast.daylight.sun_update import SunEpochAssembler
 from lightfast.errors import LightfastError
 from lightfast.ros.convert import (
+    CameraInfoReader,
     ConversionError,
-    camera_from_camera_info,
     image_to_numpy,
     make_header,
     numpy_to_image,
@@ -107,6 +107,7 @@ class DaylightRelightNode(Node):
         self._pairs: ExactTimePairs[tuple[np.ndarray, str], tuple[np.ndarray, float]] = ExactTimePairs(MAX_UNPAIRED)
         self._queue: deque[_Frame] = deque()
         self._camera: PinholeCamera | None = None
+        self._read_camera_info = CameraInfoReader()
         self._new_sun: tuple[np.ndarray, int] | None = None
         self._new_config: RelightConfig | None = None
         self.params.on_change = self._on_config
@@ -115,20 +116,20 @@ class DaylightRelightNode(Node):
         self._last: dict[str, Any] = {}
         self._status = (Level.WARN, "waiting for the first complete sun epoch")
 
-        inputs = MutuallyExclusiveCallbackGroup()
-        work = MutuallyExclusiveCallbackGroup()
         self.color_pub = self.create_publisher(Image, REFERENCE_COLOR_TOPIC, SENSOR_QOS)
         self.depth_pub = self.create_publisher(Image, REFERENCE_DEPTH_TOPIC, SENSOR_QOS)
         self.scale_pubs = {name: self.create_publisher(Vector3Stamped, SCALE_TOPIC_PREFIX + name, SENSOR_QOS)
                            for name in self.relighter.names}
         self.status_pub = self.create_publisher(DiagnosticArray, RELIGHT_STATUS_TOPIC, SENSOR_QOS)
-        self.create_subscription(Image, COLOR_TOPIC, self._on_image, SENSOR_QOS, callback_group=inputs)
-        self.create_subscription(CameraInfo, COLOR_INFO_TOPIC, self._on_camera_info, SENSOR_QOS,
-                                 callback_group=inputs)
-        self.create_subscription(PoseStamped, COARSE_POSE_TOPIC, self._on_pose, SENSOR_QOS, callback_group=inputs)
-        self.create_subscription(PointCloud2, SUN_CHUNK_TOPIC, self._on_chunk, CHUNK_QOS, callback_group=inputs)
-        self.work_trigger = self.create_guard_condition(self._work, callback_group=work)
-        self.status_timer = self.create_timer(STATUS_PERIOD_S, self._heartbeat, callback_group=work)
+        self.create_subscription(Image, COLOR_TOPIC, self._on_image, SENSOR_QOS)
+        self.create_subscription(CameraInfo, COLOR_INFO_TOPIC, self._on_camera_info, SENSOR_QOS)
+        self.create_subscription(PoseStamped, COARSE_POSE_TOPIC, self._on_pose, SENSOR_QOS)
+        self.create_subscription(PointCloud2, SUN_CHUNK_TOPIC, self._on_chunk, CHUNK_QOS)
+        self.status_timer = self.create_timer(STATUS_PERIOD_S, self._heartbeat)
+        self._wake = threading.Event()
+        self._stopping = threading.Event()
+        self._worker = threading.Thread(target=self._work, name="relight", daemon=True)
+        self._worker.start()
         self.get_logger().info(
             f"lighting map {cfg.lighting_map}: {lmap.num_vertices} vertices; camera response {cfg.crf_file}; "
             f"reference {cfg.reference}, method {cfg.method}; waiting for the first complete sun epoch"
@@ -214,11 +215,11 @@ class DaylightRelightNode(Node):
         while len(self._queue) > MAX_QUEUED:
             self._queue.popleft()
             self.stats["dropped_behind"] += 1
-        self.work_trigger.trigger()
+        self._wake.set()
 
     def _on_camera_info(self, msg: CameraInfo) -> None:
         try:
-            camera = camera_from_camera_info(msg)
+            camera = self._read_camera_info(msg)
         except ConversionError as exc:
             self._problem("camera_info", f"ignored {COLOR_INFO_TOPIC}: {exc}")
             return
@@ -241,22 +242,37 @@ class DaylightRelightNode(Node):
         if complete is not None:
             with self._lock:
                 self._new_sun = (complete, epoch)
-            self.work_trigger.trigger()
+            self._wake.set()
 
     def _on_config(self, cfg: RelightConfig) -> None:
         with self._lock:
             self._new_config = cfg
-        self.work_trigger.trigger()
+        self._wake.set()
 
     # ---------------------------------------------------------------------------------------------- worker
 
     def _work(self) -> None:
-        try:
-            self._work_once()
-        except LightfastError as exc:  # a safety net: an unexpected core error must not stop the node
-            self._problem("internal", f"relight step failed: {exc}", Level.ERROR)
+        """The worker thread: relight whatever is queued whenever an input wakes it, until the node stops."""
+        while not self._stopping.is_set():
+            self._wake.wait()
+            self._wake.clear()  # before the work: a wake-up during it runs it again
+            more = True
+            while more and not self._stopping.is_set():
+                try:
+                    more = self._work_once()
+                except Exception as exc:  # a safety net: a dead worker would stop the references silently
+                    self._problem("internal", f"relight step failed: {exc!r}", Level.ERROR)
+                    more = False
 
-    def _work_once(self) -> None:
+    def destroy_node(self) -> None:
+        self._stopping.set()
+        self._wake.set()
+        if self._worker is not threading.current_thread():
+            self._worker.join(timeout=5.0)
+        super().destroy_node()
+
+    def _work_once(self) -> bool:
+        """Apply a new B̂_sun / new options, relight the oldest queued frame; returns whether frames wait."""
         with self._lock:
             new_sun, self._new_sun = self._new_sun, None
             new_config, self._new_config = self._new_config, None
@@ -273,8 +289,7 @@ class DaylightRelightNode(Node):
             self._publish_status(Level.OK, f"sun epoch {new_sun[1]} swapped in")
         if frame is not None:
             self._process(frame, camera)
-        if more:
-            self.work_trigger.trigger()  # one frame per call: the other callbacks get their turn in between
+        return more
 
     def _process(self, f: _Frame, camera: PinholeCamera | None) -> None:
         stamp = f.stamp_ns
@@ -323,7 +338,7 @@ class DaylightRelightNode(Node):
 
 
 def main(args: list[str] | None = None) -> int:
-    return run_node(DaylightRelightNode, NODE_NAME, args, num_threads=2)
+    return run_node(DaylightRelightNode, NODE_NAME, args)
 
 
 if __name__ == "__main__":

@@ -39,8 +39,8 @@ from sensor_msgs.msg import CameraInfo, Image
 
 from lightfast.camera import PinholeCamera
 from lightfast.ros.convert import (
+    CameraInfoReader,
     ConversionError,
-    camera_from_camera_info,
     image_to_numpy,
     matrix_to_odometry,
     matrix_to_pose_stamped,
@@ -130,6 +130,7 @@ class RGBDTrackerNode(Node):
         self._frames: deque[_Frame] = deque()
         self._ref_queue: deque[tuple[int, np.ndarray, np.ndarray]] = deque()
         self._camera: PinholeCamera | None = None
+        self._read_camera_info = CameraInfoReader()
         self._reset: tuple[np.ndarray, int | None] | None = None
         self._new_config: TrackerConfig | None = None
         self.params.on_change = self._on_config
@@ -239,7 +240,7 @@ class RGBDTrackerNode(Node):
 
     def _on_camera_info(self, msg: CameraInfo) -> None:
         try:
-            camera = camera_from_camera_info(msg)
+            camera = self._read_camera_info(msg)
         except ConversionError as exc:
             self._problem("camera_info", f"ignored {COLOR_INFO_TOPIC}: {exc}")
             return

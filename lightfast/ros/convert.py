@@ -47,6 +47,7 @@ __all__ = [
     "ROTATION_TOLERANCE",
     "SUPPORTED_DISTORTION_MODELS",
     "CameraInfoError",
+    "CameraInfoReader",
     "ConversionError",
     "ImageConversionError",
     "ImageEncoding",
@@ -740,6 +741,26 @@ def camera_from_camera_info(msg: Any) -> PinholeCamera:
         return PinholeCamera.from_matrix(k.reshape(3, 3), width, height)
     except CameraModelError as exc:
         raise CameraInfoError(f"CameraInfo.k: {exc}") from exc
+
+
+class CameraInfoReader:
+    """:func:`camera_from_camera_info` that keeps its last result: a driver sends the same ``CameraInfo`` with every
+    image, and a node that converts each one spends more on the checks than on anything else it does per message."""
+
+    def __init__(self) -> None:
+        self._key: tuple[Any, ...] | None = None
+        self._camera: PinholeCamera | None = None
+
+    def __call__(self, msg: Any) -> PinholeCamera:
+        roi = getattr(msg, "roi", None)
+        key = (int(msg.width), int(msg.height), str(msg.distortion_model), bytes(np.asarray(msg.d, np.float64)),
+               bytes(np.asarray(msg.k, np.float64)), bytes(np.asarray(msg.p, np.float64)),
+               getattr(msg, "binning_x", 0), getattr(msg, "binning_y", 0),
+               None if roi is None else (roi.x_offset, roi.y_offset, roi.width, roi.height))
+        if key != self._key or self._camera is None:
+            self._camera = camera_from_camera_info(msg)  # raises before the key is kept
+            self._key = key
+        return self._camera
 
 
 def camera_info_from_camera(

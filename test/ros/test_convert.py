@@ -21,6 +21,7 @@ from lightfast.errors import LightfastError
 from lightfast.ros.convert import (
     IMAGE_ENCODINGS,
     CameraInfoError,
+    CameraInfoReader,
     ConversionError,
     ImageConversionError,
     PointCloudConversionError,
@@ -787,3 +788,19 @@ def test_rclpy_flavour_copies_pixels_once() -> None:
 def test_rclpy_messages_keep_default_field_checking() -> None:
     msg = numpy_to_image(np.zeros((2, 2), np.uint8), "mono8", types=RCLPY)
     assert msg._check_fields == sensor_msgs.msg.Image()._check_fields
+
+
+def test_camera_info_reader_keeps_the_last_camera_until_the_message_changes() -> None:
+    read = CameraInfoReader()
+    cam = PinholeCamera(64, 48, 50.0, 50.0, 32.0, 24.0)
+    first = read(camera_info_from_camera(cam))
+    assert first == cam and read(camera_info_from_camera(cam)) is first  # same contents: not converted again
+    bad = camera_info_from_camera(cam)
+    bad.d = array.array("d", [-0.28, 0.07, 0.0, 0.0, 0.0])
+    with pytest.raises(CameraInfoError):
+        read(bad)
+    with pytest.raises(CameraInfoError):  # a bad message is never remembered as good
+        read(bad)
+    other = PinholeCamera(64, 48, 51.0, 50.0, 32.0, 24.0)
+    assert read(camera_info_from_camera(other)) == other
+    assert read(camera_info_from_camera(cam)) == cam
