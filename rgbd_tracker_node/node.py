@@ -135,7 +135,7 @@ class RGBDTrackerNode(Node):
         self._new_config: TrackerConfig | None = None
         self.params.on_change = self._on_config
         self.stats = {"frames_in": 0, "frames_tracked": 0, "f2m": 0, "f2f": 0, "dropped_behind": 0,
-                      "dropped_unpaired": 0, "late_references": 0, "bad_inputs": 0}
+                      "dropped_unpaired": 0, "late_references": 0, "superseded_references": 0, "bad_inputs": 0}
         self._wake_f2f = threading.Event()
         self._wake_f2m = threading.Event()
         self._stopping = threading.Event()
@@ -313,14 +313,17 @@ class RGBDTrackerNode(Node):
         return more
 
     def _refine_work(self) -> bool:
-        """One f2m step: the oldest received reference. Returns whether more wait."""
+        """One f2m step: the newest received reference. Older waiting ones are dropped: refining the newest frame
+        finishes the older ones with their f2f pose anyway, and when f2m falls behind, working through a backlog
+        would only refine frames whose poses are already late. Returns whether more wait."""
         with self._lock:
             if not self._ref_queue:
                 return False
-            stamp, rgb, depth = self._ref_queue.popleft()
-            more = bool(self._ref_queue)
+            stamp, rgb, depth = self._ref_queue.pop()
+            self.stats["superseded_references"] += len(self._ref_queue)
+            self._ref_queue.clear()
         self._refine(stamp, rgb, depth)
-        return more
+        return False
 
     def _apply_config(self, cfg: TrackerConfig) -> None:
         old, self.config = self.config, cfg
@@ -393,7 +396,7 @@ class RGBDTrackerNode(Node):
             if tracker is None or stamp not in self._pending:
                 self._late(stamp)
                 return
-            for s in [s for s in self._pending if s < stamp]:  # references come in order: these lost theirs
+            for s in [s for s in self._pending if s < stamp]:  # the newest reference first: these lost theirs
                 self._publish_result(tracker.skip_reference(s, "no reference (a later frame's reference came)"))
             try:
                 job = tracker.start_refine(stamp, rgb, depth)
