@@ -93,14 +93,15 @@ def markdown(runs: list[dict], args: argparse.Namespace) -> str:
     lines = [
         "# Cross-process tracking pipeline (paper §IV-D, Table II)",
         "",
-        f"`scripts/demo.sh`: three node processes, {args.frames} frames of DS1.T6 (cloudy) replayed with /clock at "
-        f"the input frame rate of each row (30 Hz × playback rate), mode `{args.mode}`, sun update restarted every "
-        f"{args.sun_period:g} s of sim time (niced, in the background) so that B̂_sun chunks stream while the frames "
-        f"are tracked, {args.preroll:g} s clock preroll for the first epoch. Poses/s = poses per second of wall time "
-        "at the recorder; f2m = share of the poses refined against their relit reference (the others are f2f poses: "
-        "their reference did not come in time); latency = tracker publication time minus the image stamp. Per-stage "
-        "times are medians over the frames, from the nodes' status messages (wall time inside each node, so they "
-        "include waiting for the CPU). CPU = CPU time of every process from the first frame on, per frame.",
+        f"`scripts/demo.sh`: three node processes, {args.frames} frames of DS1.T6 (cloudy) replayed with /clock at"
+        f" the input frame rate of each row (30 Hz × playback rate), mode `{args.mode}`, {args.preroll:g} s clock "
+        f"preroll for the first B̂_sun epoch, sun update restarted every {args.sun_period:g} s of sim time (niced,"
+        f" in the background) so that the next epoch's chunks stream while the frames are tracked. Poses/s = poses"
+        f" per second of wall time at the recorder; f2m = share of the poses refined against their relit reference"
+        f" (the others are f2f poses: their reference did not come in time); latency = tracker publication time "
+        f"minus the image stamp. Per-stage times are medians over the frames, from the nodes' status messages "
+        f"(wall time inside each node, so they include waiting for the CPU). CPU = CPU time of every process from "
+        f"the first frame on, per frame.",
         "",
         "| size | input fps | poses/s | f2m | latency median | latency p95 | f2f ms | rendering ms | "
         "estimation ms | f2m ms | CPU ms/frame: tracker + relight + sun + recorder + player | sun chunks "
@@ -164,7 +165,9 @@ def main() -> int:
     p.add_argument("--sizes", nargs="+", default=["320x240", "640x480"])
     p.add_argument("--rates", type=json.loads, default={"320x240": [1.0, 0.6], "640x480": [0.5, 0.25]},
                    help="per size, the playback rates to run (JSON object; input fps = 30 × rate)")
-    p.add_argument("--sun-period", type=float, default=20.0, help="seconds between sun updates (default 20)")
+    p.add_argument("--sun-period", type=float, default=None,
+                   help="seconds between sun updates (default: preroll + 1 s, so that the second epoch streams "
+                        "during the replay)")
     p.add_argument("--preroll", type=float, default=45.0,
                    help="seconds of /clock before the first frame, for the first sun epoch (default 45)")
     p.add_argument("--mode", default="proposed")
@@ -173,6 +176,8 @@ def main() -> int:
                         '\'{"640x480": "resolution_scale=0.5"}\')')
     p.add_argument("--out", type=Path, default=Path.home() / ".cache" / "lightfast" / "bench-pipeline")
     args = p.parse_args()
+    if args.sun_period is None:
+        args.sun_period = args.preroll + 1.0
     runs = []
     for size in args.sizes:
         tracker_params = dict(kv.split("=", 1) for kv in args.tracker_params.get(size, "").split())

@@ -12,7 +12,7 @@
 #   RESOLUTION       scene mesh resolution in metres (default 0.04: a quick first run)
 #   PATCH_SIZE       lighting-map patch size in metres (default 0.1, as in the paper)
 #   SUN_UPDATE_PERIOD  seconds between B̂_sun updates (default 60; small values keep sun chunks streaming)
-#   PREROLL          seconds the clock runs before the first frame, for the first sun update (default 15)
+#   PREROLL          seconds the clock runs before the first frame, for the first sun update (default 30)
 #   MODE             tracker mode: proposed | refl-f2m | depth-only | no-color-f2m (default proposed)
 #   RATE             playback rate (default 1 = real time)
 #   TRACKER_PARAMS   extra rgbd_tracker_node parameters, e.g. "finest_point_step:=2 f2m_iterations:=[4,3,2]"
@@ -28,7 +28,7 @@ frames=${FRAMES:-300}
 size=${SIZE:-320x240}
 resolution=${RESOLUTION:-0.04}
 patch_size=${PATCH_SIZE:-0.1}
-preroll=${PREROLL:-15}
+preroll=${PREROLL:-30}
 sun_period=${SUN_UPDATE_PERIOD:-60.0}
 [[ $sun_period == *.* ]] || sun_period="$sun_period.0"  # a double parameter
 mode=${MODE:-proposed}
