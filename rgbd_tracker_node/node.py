@@ -15,8 +15,10 @@ with its f2f pose. Each finished frame is published on ``/tracker/pose`` (PoseSt
 Threading: the executor's callbacks only convert and buffer, then wake one of two worker threads. The f2f worker
 tracks the queued frames one at a time, applies parameter changes, resets and camera changes, and finishes frames
 whose reference is overdue (it also wakes on its own every ``reference_timeout_s / 4``, at most 0.1 s). The f2m
-worker refines the frames whose reference came. The tracker's state is touched under one lock and the f2m
-alignment runs outside it, so it overlaps the f2f alignment of the next frame (NumPy and Open3D release the GIL).
+worker refines the frame of the newest reference that came (when it falls behind, older references are dropped
+and their frames keep the f2f pose: on an overloaded machine a share of the frames is refined, without a backlog).
+The tracker's state is touched under one lock and the f2m alignment runs outside it, so it overlaps the f2f
+alignment of the next frame (the numba kernels release the GIL).
 Plain threads rather than callback groups on rclpy's MultiThreadedExecutor: there, guard-condition triggers raised
 while the worker's group was busy got lost (a 20-frame demo lost 7 frames).
 """
