@@ -7,6 +7,9 @@ import tempfile
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
+from typing import Any
+
+import yaml
 
 
 def write_text_atomic(path: str | os.PathLike[str], text: str) -> None:
@@ -54,3 +57,20 @@ def atomic_directory(path: str | os.PathLike[str], *, overwrite: bool = False) -
     os.replace(tmp, path)
     if old is not None:
         shutil.rmtree(old, ignore_errors=True)
+
+
+def read_versioned_yaml(path: str | os.PathLike[str], *, format_name: str, version: int, error: type[Exception],
+                        what: str, version_key: str = "version") -> dict[str, Any]:
+    """Read a YAML mapping (``yaml.safe_load``) that names its ``format`` and version, for the loaders of lightfast's
+    versioned files. Raises ``error`` with the reason when the file cannot be read, is not a mapping of format
+    ``format_name`` (described as ``what``), or has another version."""
+    path = Path(path)
+    try:
+        doc = yaml.safe_load(path.read_text())
+    except (OSError, yaml.YAMLError) as exc:
+        raise error(f"{path}: cannot read {what} ({exc})") from None
+    if not isinstance(doc, dict) or doc.get("format") != format_name:
+        raise error(f"{path} is not {what} (expected format: {format_name})")
+    if doc.get(version_key) != version:
+        raise error(f"{path}: {what} {version_key} {doc.get(version_key)} is not supported (reads {version})")
+    return doc

@@ -35,7 +35,7 @@ import yaml
 from numpy.typing import ArrayLike, NDArray
 
 from lightfast.errors import LightfastError
-from lightfast.io import write_text_atomic
+from lightfast.io import read_versioned_yaml, write_text_atomic
 
 __all__ = ["Opening", "OpeningsError", "load_openings", "openings_array", "save_openings", "through_openings"]
 
@@ -117,14 +117,8 @@ def save_openings(path: str | os.PathLike[str], openings: Sequence[Opening]) -> 
 def load_openings(path: str | os.PathLike[str]) -> tuple[Opening, ...]:
     """Read an openings file (see the module docstring)."""
     path = Path(path)
-    try:
-        doc = yaml.safe_load(path.read_text())
-    except (OSError, yaml.YAMLError) as exc:
-        raise OpeningsError(f"{path}: cannot read openings ({exc})") from None
-    if not isinstance(doc, dict) or doc.get("format") != FORMAT_NAME:
-        raise OpeningsError(f"{path} is not an openings file (expected format: {FORMAT_NAME})")
-    if doc.get("version") != FORMAT_VERSION:
-        raise OpeningsError(f"{path}: openings version {doc.get('version')} is not supported (reads {FORMAT_VERSION})")
+    doc = read_versioned_yaml(path, format_name=FORMAT_NAME, version=FORMAT_VERSION, error=OpeningsError,
+                              what="an openings file")
     items = doc.get("openings")
     if not isinstance(items, list) or not items:
         raise OpeningsError(f"{path}: 'openings' must be a non-empty list")

@@ -120,7 +120,7 @@ from lightfast.daylight.mesh import MeshError, ReflectanceMesh, load_ply, save_p
 from lightfast.daylight.sun import Site, sun_position
 from lightfast.errors import LightfastError
 from lightfast.geometry import inverse, make_transform, so3_exp
-from lightfast.io import atomic_directory, write_bytes_atomic, write_text_atomic
+from lightfast.io import atomic_directory, read_versioned_yaml, write_bytes_atomic, write_text_atomic
 from lightfast.progress import track
 from lightfast.raycast import RayCaster
 from lightfast.sim.racr_platform import PlatformConfig, PlatformSimulator, VseConfig, VseStandIn
@@ -1873,15 +1873,8 @@ def load_reference(path: str | os.PathLike[str], *, scene: str | None = None) ->
     meta = path / "reference.yaml"
     if not meta.is_file():
         raise RacrSimError(f"{path}: no reference observation (reference.yaml missing)")
-    try:
-        doc = yaml.safe_load(meta.read_text())
-    except (OSError, yaml.YAMLError) as exc:
-        raise RacrSimError(f"{meta}: unreadable: {exc}") from None
-    if not isinstance(doc, dict) or doc.get("format") != REFERENCE_FORMAT:
-        raise RacrSimError(f"{meta}: not a {REFERENCE_FORMAT} file")
-    if doc.get("format_version") != REFERENCE_VERSION:
-        raise RacrSimError(f"{meta}: format_version {doc.get('format_version')} is not supported "
-                           f"(expected {REFERENCE_VERSION})")
+    doc = read_versioned_yaml(meta, format_name=REFERENCE_FORMAT, version=REFERENCE_VERSION, error=RacrSimError,
+                              what="a reference observation", version_key="format_version")
     if scene is not None and doc.get("scene") != scene:
         raise RacrSimError(f"{meta}: reference observation of scene {doc.get('scene')!r}, not {scene!r}")
     try:

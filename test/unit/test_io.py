@@ -1,6 +1,6 @@
 import pytest
 
-from lightfast.io import atomic_directory, write_text_atomic
+from lightfast.io import atomic_directory, read_versioned_yaml, write_text_atomic
 
 
 def test_write_text_atomic_replaces_and_leaves_no_temp(tmp_path) -> None:
@@ -23,3 +23,34 @@ def test_atomic_directory_failure_keeps_old(tmp_path) -> None:
     with pytest.raises(FileExistsError):
         with atomic_directory(target):
             pass
+
+
+class _ThingError(Exception):
+    pass
+
+
+@pytest.mark.parametrize(
+    ("text", "match"),
+    [
+        ("format: thing\nversion: 1\nx: 2\n", None),
+        ("format: other\nversion: 1\n", "is not a thing file"),
+        ("- a list\n", "is not a thing file"),
+        ("format: thing\nversion: 2\n", "version 2 is not supported"),
+        ("format: thing\nversion: [1\n", "cannot read a thing file"),
+    ],
+)
+def test_read_versioned_yaml_checks_format_and_version(tmp_path, text: str, match: str | None) -> None:
+    path = tmp_path / "doc.yaml"
+    path.write_text(text)
+    read = lambda: read_versioned_yaml(path, format_name="thing", version=1, error=_ThingError, what="a thing file")  # noqa: E731
+    if match is None:
+        assert read()["x"] == 2
+    else:
+        with pytest.raises(_ThingError, match=match):
+            read()
+
+
+def test_read_versioned_yaml_missing_file_raises_the_given_error(tmp_path) -> None:
+    with pytest.raises(_ThingError, match="cannot read"):
+        read_versioned_yaml(tmp_path / "nope.yaml", format_name="thing", version=1, error=_ThingError,
+                            what="a thing file")
