@@ -171,6 +171,30 @@ def test_reference_refines_the_coarse_pose(start_nodes, scene: Scene) -> None:
     assert errors(pose_of(probe.got["coarse"][stamp(0)]), scene.poses[0])[0] > 0.015  # the start was off
 
 
+def test_when_f2m_falls_behind_the_newest_reference_is_refined(start_nodes, scene: Scene) -> None:
+    tracker, _, probe = start_nodes({"initial_pose": pose7(scene.poses[0]), "reference_timeout_s": 10.0})
+    probe.publish("info", camera_info_from_camera(scene.camera, frame_id=OPTICAL_FRAME))
+    for i in range(4):
+        send_frame(probe, scene, i)
+        assert probe.spin_until(lambda i=i: stamp(i) in probe.got["coarse"])
+    refs = {}
+    for i in (1, 2, 3):
+        ref_rgb, ref_depth = scene.render(pose_of(probe.got["coarse"][stamp(i)]))
+        refs[i] = (numpy_to_image(ref_rgb, "rgb8", stamp_ns=stamp(i), frame_id=OPTICAL_FRAME),
+                   numpy_to_image(ref_depth, "32FC1", stamp_ns=stamp(i), frame_id=OPTICAL_FRAME))
+    with tracker._state:  # the f2m worker is busy: references pile up
+        for i in (1, 2, 3):
+            probe.publish("ref_color", refs[i][0])
+            probe.publish("ref_depth", refs[i][1])
+        assert probe.spin_until(lambda: stamp(3) in [r[0] for r in tracker._ref_queue])
+    assert probe.spin_until(lambda: all(stamp(i) in probe.got["pose"] for i in range(4)))
+    _, _, values = final_status(probe, 3)
+    assert values["source"] == "f2m"
+    _, message, values = final_status(probe, 2)  # its reference waited behind the newest one: dropped
+    assert values["source"] == "f2f" and "a later frame's reference came" in message
+    assert tracker.stats["superseded_references"] >= 1 and tracker.stats["f2m"] <= 2
+
+
 def test_bad_input_is_reported_and_tracking_resumes(start_nodes, scene: Scene) -> None:
     tracker, _, probe = start_nodes({"initial_pose": pose7(scene.poses[0]), "reference_timeout_s": 0.05,
                                      "pose_prior_weight": 0.0})  # f2f poses are final: Eq. 7 alone (see above)
