@@ -368,6 +368,10 @@ def run(func: Callable[[argparse.Namespace], int], args: argparse.Namespace, *, 
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    # Ctrl-C / SIGINT interrupts a command even when a script started it in the background (`cmd &` in a
+    # non-interactive shell starts it with SIGINT ignored; the demos stop their processes with SIGINT)
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, signal.default_int_handler)
     args = build_parser().parse_args(argv)
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
                         format="lightfast: %(levelname)s: %(message)s")
