@@ -55,6 +55,8 @@ class VtrLocalizerConfig(Config):
                              "mcmanus (colour-constant only when grey fails).", choices=MODES, read_only=True)
     window_radius: int = param(2, description="Repeat: keyframes on each side of the nearest one in the "
                                "localization window.", min=0, max=50, read_only=True)
+    search_window_radius: int = param(0, description="Repeat: keyframes on each side of every candidate in the "
+                                      "whole-map search (0: each keyframe alone).", min=0, max=50, read_only=True)
     min_inliers: int = param(6, description="Repeat: fewest inliers for a successful localization (paper: 6).",
                              min=4, max=10000, read_only=True)
     max_distance_on_vo_m: float = param(20.0, description="Repeat: distance on VO alone after which a localization "
@@ -113,6 +115,7 @@ class VtrLocalizerConfig(Config):
     def repeat_config(self) -> RepeatConfig:
         return RepeatConfig(
             mode=self.repeat_mode, window_radius=self.window_radius, min_inliers=self.min_inliers,
+            search_window_radius=self.search_window_radius,
             max_distance_on_vo_m=self.max_distance_on_vo_m, match_radius_px=self.match_radius_px,
             ransac_threshold_px=self.ransac_threshold_px, max_position_std_m=self.max_position_std_m,
             prior_gate_m=self.prior_gate_m, prior_gate_per_m=self.prior_gate_per_m,

@@ -35,9 +35,10 @@ Per stereo frame (:meth:`RepeatPipeline.step`, the call a node makes per synchro
    the VO prior (no gate for the whole-map search, which has no prior).
 5. **Failure handling** (§IV-C): without success the VO prior is the pose and the distance driven on VO alone
    accumulates; beyond ``max_distance_on_vo_m`` (20 m) it is a **localization failure**: the robot "stops" and
-   the **whole map is searched** (every keyframe alone, unguided matching, the mode's sources; the most inliers
-   win). The search is repeated every frame until it succeeds (``relocalized``). Before the first localization
-   the pipeline is in the same state (the paper: "the map is searched until the live stereo feed localizes");
+   the **whole map is searched** (every keyframe alone, or with ``search_window_radius`` neighbours, unguided
+   matching, the mode's sources; the most inliers win). The search is repeated every frame until it succeeds
+   (``relocalized``). Before the first localization the pipeline is in the same state (the paper: "the map is
+   searched until the live stereo feed localizes");
    with ``initial_keyframe`` only the window around that keyframe is tried (unguided) until the failure distance.
 
 Output per frame: :class:`RepeatResult` — ``T_kf_cam`` (the camera in the frame of keyframe ``keyframe_index``,
@@ -98,6 +99,11 @@ class RepeatConfig(Config):
                       choices=MODES)
     window_radius: int = param(
         2, description="Keyframes on each side of the expected nearest keyframe in the localization window.", min=0,
+        max=50,
+    )
+    search_window_radius: int = param(
+        0, description="Keyframes on each side of every candidate keyframe in the whole-map search (0: each keyframe "
+        "alone; 2 as window_radius doubled the candidate matches at the start of the evening repeat07).", min=0,
         max=50,
     )
     min_inliers: int = param(6, description="Fewest inliers for a successful localization (paper: 6).", min=4)
@@ -335,10 +341,12 @@ class MapLocalizer:
 
     def search(self, features: Mapping[str, StereoFeatures], camera: StereoCamera,
                more: FeatureSupplier | None = None) -> Localization:
-        """Whole-map search (§IV-C): every keyframe alone, unguided; the most inliers win (first on ties)."""
+        """Whole-map search (§IV-C): every keyframe (with ``search_window_radius`` neighbours on each side),
+        unguided; the most inliers win (first on ties)."""
         best: Localization | None = None
-        for k in range(len(self.map)):
-            loc = self.localize(features, camera, k, (k,), None, more)
+        r, n = self.config.search_window_radius, len(self.map)
+        for k in range(n):
+            loc = self.localize(features, camera, k, tuple(range(max(0, k - r), min(n, k + r + 1))), None, more)
             if more is not None and self.config.mode == "mcmanus" and not loc.success:
                 features, more = more(), None  # computed once; later keyframes reuse them
             if best is None or (loc.success and (not best.success or loc.inliers > best.inliers)):

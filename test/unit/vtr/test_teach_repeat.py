@@ -455,6 +455,29 @@ def test_failure_after_distance_on_vo_then_whole_map_search(taught: Taught, repe
     assert abs(kf_z - truth_z) <= 0.6  # the nearest keyframe along the path
 
 
+@pytest.mark.parametrize("radius", [0, 2])
+def test_whole_map_search_with_keyframe_windows(taught: Taught, repeat_features, radius: int):
+    """The kidnapped search tries every keyframe with its ``search_window_radius`` neighbours and relocalizes."""
+    from lightfast.vtr.repeat import MapLocalizer
+
+    rp = RepeatPipeline(taught.teach_map, _repeat_config("fused", search_window_radius=radius))
+    windows = []
+    localize = MapLocalizer.localize
+
+    def spy(self, features, camera, ref, window, *args, **kwargs):
+        windows.append(tuple(window))
+        return localize(self, features, camera, ref, window, *args, **kwargs)
+
+    n = len(taught.teach_map)
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(MapLocalizer, "localize", spy)
+        first = rp.step_features(0, repeat_features["changed"][12], P_LEFT, P_RIGHT)
+    assert windows == [tuple(range(max(0, k - radius), min(n, k + radius + 1))) for k in range(n)]
+    assert first.searched_map and first.relocalized and first.localized
+    kf_z = taught.kf_pose[first.keyframe_index][2, 3]
+    assert abs(kf_z + first.T_kf_cam[2, 3] - REPEAT_Z[12]) < 0.1
+
+
 def test_repeat_step_on_images_and_mcmanus_lazy_sources(taught: Taught, scene: Scene):
     """The node-facing call (images in) in every mode; mcmanus computes F_v/F_r only when grey fails."""
     rng = np.random.default_rng(30)
