@@ -359,25 +359,28 @@ def _prepare(rgb: ArrayLike, depth_m: ArrayLike, camera: PinholeCamera, cfg: Tra
     return RGBDFrame(tuple(levels), camera, cfg.pyramid_levels, cfg.resolution_scale)
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _kept(i: int, j: int, step: int) -> bool:
+    """Pixel (i, j) is a source point at ``step``: every pixel (1), a checkerboard (2), every 2nd row and column (4)."""
+    return step == 1 or (step == 2 and (i + j) % 2 == 0) or (step == 4 and i % 2 == 0 and j % 2 == 0)
+
+
 @numba.njit(cache=True, nogil=True)
 def _source_points(geometry: NDArray[np.float32], grey: NDArray[np.float32], step: int
                    ) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
-    """Vertices (N, 3) and grey values (N,) of the pixels with depth, row-major; of every pixel (``step`` 1), a
-    checkerboard (2) or every second row and column (4)."""
+    """Vertices (N, 3) and grey values (N,) of the pixels with depth that :func:`_kept` keeps, row-major."""
     h, w = grey.shape
     n = 0
     for i in range(h):
         for j in range(w):
-            if geometry[i, j, 0] > 0.0 and (step == 1 or (step == 2 and (i + j) % 2 == 0)
-                                            or (step == 4 and i % 2 == 0 and j % 2 == 0)):
+            if geometry[i, j, 0] > 0.0 and _kept(i, j, step):
                 n += 1
     points = np.empty((n, 3), dtype=np.float32)
     point_grey = np.empty(n, dtype=np.float32)
     k = 0
     for i in range(h):
         for j in range(w):
-            if geometry[i, j, 0] > 0.0 and (step == 1 or (step == 2 and (i + j) % 2 == 0)
-                                            or (step == 4 and i % 2 == 0 and j % 2 == 0)):
+            if geometry[i, j, 0] > 0.0 and _kept(i, j, step):
                 points[k, 0], points[k, 1], points[k, 2] = geometry[i, j, 1], geometry[i, j, 2], geometry[i, j, 3]
                 point_grey[k] = grey[i, j]
                 k += 1
