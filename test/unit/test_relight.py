@@ -7,8 +7,9 @@ import pytest
 
 from lightfast.camera import PinholeCamera
 from lightfast.daylight.brightness import BrightnessError, relit_image
+from lightfast.daylight.crf import CameraResponse
 from lightfast.daylight.lighting_map import LightingMapConfig, prepare_lighting_map
-from lightfast.daylight.relight import DaylightRelighter, RelightConfig
+from lightfast.daylight.relight import DaylightRelighter, RelightConfig, _apply_response, _response_table
 from lightfast.daylight.sun import FREIBURG
 from lightfast.daylight.sun_update import SunEpochAssembler, sun_radiosity
 from lightfast.geometry import compose, inverse, rotation_angle_deg, se3_exp
@@ -73,6 +74,22 @@ def test_relighter_estimates_scales_and_renders_the_live_image(room, true_crf):
     grey = np.array([0.299, 0.587, 0.114])
     hit = depth > 0
     assert abs((refl.color[hit] @ grey).mean() - (rgb[hit] @ grey).mean()) < 2.0
+
+
+@pytest.mark.parametrize("gamma", [0.45, 1.0, 2.2, 5.0])
+def test_reference_colour_is_the_rounded_camera_response(gamma):
+    """The table lookup of the reference shading gives round(f(x)) of CameraResponse.apply for every exposure,
+    including the thresholds themselves, values beyond both ends of the curve, inf and NaN (0)."""
+    levels = np.arange(256.0)
+    inverse = np.stack([s * (levels / 255) ** gamma + o + 1e-9 * levels for s, o in ((1, 0), (2, 0.01), (0.5, 1e-3))],
+                       axis=1)
+    crf = CameraResponse(inverse)
+    rng = np.random.default_rng(1)
+    x = np.concatenate([rng.uniform(-0.1, 2.2, (50_000, 3)), rng.uniform(0, 1e-3, (5_000, 3)), inverse,
+                        0.5 * (inverse[1:] + inverse[:-1]), [[np.inf, -np.inf, 1e30]]]).astype(np.float32)
+    expected = np.minimum(255, np.floor(crf.apply(x.astype(np.float64)) + 0.5)).astype(np.uint8)
+    np.testing.assert_array_equal(_apply_response(x, *_response_table(crf.inverse)), expected)
+    assert _apply_response(np.full((1, 3), np.nan, np.float32), *_response_table(crf.inverse)).tolist() == [[0, 0, 0]]
 
 
 def test_relighter_rejects_bad_input(room, true_crf):
