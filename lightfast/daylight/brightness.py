@@ -38,6 +38,7 @@ from dataclasses import dataclass
 from functools import lru_cache
 from typing import TYPE_CHECKING, Literal
 
+import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import nnls
@@ -268,63 +269,86 @@ def _as_scales(scales: ArrayLike | Mapping[str, ArrayLike] | ScaleFit, names: Se
     return arr
 
 
-def _crf_residuals(crf: CameraResponse, A: F64, y: F64, c: int, s: F64) -> F64:
-    x = np.zeros((len(y), 3))
-    x[:, c] = A @ s
-    return crf.apply(x)[:, c] - y
+@numba.njit(cache=True, nogil=True)
+def _crf_residuals(A: F64, y: F64, table: F64, slopes: F64, s: F64) -> tuple[F64, F64]:
+    """Residuals ``f_c(A s) − y`` of one channel and their derivatives ``f_c′(A s)``: the inverse table ``table``
+    (256,) of the channel is linear between its entries (``slopes`` (255,) their reciprocal spacing); ``f`` is 0
+    below ``table[0]`` and 255 from ``table[255]`` on, with slope 0 there (as :meth:`CameraResponse.
+    channel_and_derivative`)."""
+    n, top = len(y), len(table) - 1
+    x = A @ s
+    r = np.empty(n)
+    d = np.zeros(n)
+    for i in range(n):
+        k = np.searchsorted(table, x[i], side="right") - 1  # segment; -1 below, top at/after the end
+        if k < 0:
+            r[i] = -y[i]
+        elif k >= top:
+            r[i] = top - y[i]
+        else:
+            d[i] = slopes[k]
+            r[i] = k + (x[i] - table[k]) * d[i] - y[i]
+    return r, d
 
 
-def _fit_channel_crf(crf: CameraResponse, A: F64, y: F64, c: int, x0: F64, solver: str, *,
-                     max_iterations: int = 30, tolerance: float = 1e-7) -> F64:
+@numba.njit(cache=True, nogil=True)
+def _fit_channel_crf(A: F64, y: F64, table: F64, slopes: F64, x0: F64, bounded: bool, max_iterations: int,
+                     tolerance: float) -> F64:
     """Minimize Eq. 4 for one channel over the columns of ``A`` (already multiplied by Δt) by Levenberg–Marquardt.
 
     A hand-written LM (Marquardt's diagonal damping; the system has only K ≤ 3 unknowns, so one step costs one
-    evaluation of f and f′ and a K×K solve — far cheaper than a general solver's bookkeeping). ``solver="bounded-lm"``
-    keeps ``s ≥ 0`` by projecting every trial step onto the bound (a step is accepted only if it lowers the cost);
-    ``"lm"`` is unconstrained and the result is clipped at 0.
+    evaluation of f and f′ and a K×K solve — far cheaper than a general solver's bookkeeping). ``bounded`` keeps
+    ``s ≥ 0`` by projecting every trial step onto the bound (a step is accepted only if it lowers the cost);
+    unbounded, the result is clipped at 0. ``table``, ``slopes``: the channel's response as in
+    :func:`_crf_residuals`.
     """
-    if solver == "lm" and len(y) < len(x0):
-        raise BrightnessError(f"Levenberg-Marquardt needs at least {len(x0)} pixels, got {len(y)}")
-    bounded = solver != "lm"
-
-    def evaluate(s: F64) -> tuple[F64, F64, float]:
-        v, d = crf.channel_and_derivative(A @ s, c)
-        r = v - y
-        return r, d[:, None] * A, float(r @ r)
-
-    s = np.maximum(x0, 0.0) if bounded else x0.astype(np.float64)
-    r, J, cost = evaluate(s)
+    k = len(x0)
+    s = np.maximum(x0, 0.0) if bounded else x0.copy()
+    r, d = _crf_residuals(A, y, table, slopes, s)
+    J = d[:, None] * A
+    cost = r @ r
     lam = 1e-3
     for _ in range(max_iterations):
         g = J.T @ r
         H = J.T @ J
         # bounded: components held at s = 0 by a gradient pointing below it stay fixed (active set)
-        free = ~((s <= 0.0) & (g > 0.0)) if bounded else np.ones(len(s), dtype=bool)
-        if not free.any():
+        free = np.ones(k, dtype=np.bool_)
+        if bounded:
+            free = ~((s <= 0.0) & (g > 0.0))
+        idx = np.flatnonzero(free)
+        m = len(idx)
+        if m == 0:
             break
-        Hf, gf = H[np.ix_(free, free)], g[free]
-        diag = np.maximum(np.diag(Hf), 1e-12 * max(float(np.max(np.diag(H))), 1e-300))
+        Hf = np.empty((m, m))
+        gf = np.empty(m)
+        for a in range(m):
+            gf[a] = g[idx[a]]
+            for b in range(m):
+                Hf[a, b] = H[idx[a], idx[b]]
+        diag = np.maximum(np.diag(Hf).copy(), 1e-12 * max(np.max(np.diag(H)), 1e-300))
         improved = False
+        rel = moved = 0.0
         while lam < 1e8:
-            try:
-                step_f = np.linalg.solve(Hf + lam * np.diag(diag), -gf)
-            except np.linalg.LinAlgError:
+            M = Hf + lam * np.diag(diag)
+            if abs(np.linalg.det(M)) == 0.0:  # singular: more damping
                 lam *= 10.0
                 continue
+            step_f = np.linalg.solve(M, -gf)
             trial = s.copy()
-            trial[free] += step_f
+            trial[idx] += step_f
             if bounded:
                 trial = np.maximum(trial, 0.0)
-            r_t, J_t, cost_t = evaluate(trial)
+            r_t, d_t = _crf_residuals(A, y, table, slopes, trial)
+            cost_t = r_t @ r_t
             if cost_t < cost:
-                moved = float(np.linalg.norm(trial - s))
+                moved = np.sqrt(np.sum((trial - s) ** 2))
                 rel = (cost - cost_t) / max(cost, 1e-300)
-                s, r, J, cost = trial, r_t, J_t, cost_t
+                s, r, J, cost = trial, r_t, d_t[:, None] * A, cost_t
                 lam = max(lam / 10.0, 1e-12)
                 improved = True
                 break
             lam *= 10.0
-        if not improved or rel < tolerance or moved <= 1e-5 * (1.0 + float(np.linalg.norm(s))):
+        if not improved or rel < tolerance or moved <= 1e-5 * (1.0 + np.sqrt(np.sum(s ** 2))):
             break
     return np.maximum(s, 0.0)
 
@@ -380,7 +404,8 @@ def fit_scales(
     rms = np.full(3, np.nan)
     for c in range(3):
         A = B[:, :, c]
-        y = y_all[:, c]
+        y = np.ascontiguousarray(y_all[:, c])
+        table, slopes = crf.channel_table(c)
         norms = np.linalg.norm(A, axis=0)
         obs = norms > 1e-9 * max(float(norms.max(initial=0.0)), 1e-30)
         if not obs.any():
@@ -397,10 +422,13 @@ def fit_scales(
             candidates = [nnls(Ao[rows], b)[0]]
             if initial is not None:
                 candidates.append(np.maximum(s0[obs, c], 0.0) if solver == "bounded-lm" else s0[obs, c])
-            costs = [float(np.sum(_crf_residuals(crf, Ao * dt, y, c, s) ** 2)) for s in candidates]
+            costs = [float(np.sum(_crf_residuals(Ao * dt, y, table, slopes, s)[0] ** 2)) for s in candidates]
             x0 = candidates[int(np.argmin(costs))]
-            scales[obs, c] = _fit_channel_crf(crf, Ao * dt, y, c, x0, solver)
-        r = _crf_residuals(crf, A * dt, y, c, scales[:, c])
+            if solver == "lm" and len(y) < len(x0):
+                raise BrightnessError(f"Levenberg-Marquardt needs at least {len(x0)} pixels, got {len(y)}")
+            scales[obs, c] = _fit_channel_crf(np.ascontiguousarray(Ao * dt), y, table, slopes, x0,
+                                              solver == "bounded-lm", 30, 1e-7)
+        r = _crf_residuals(np.ascontiguousarray(A * dt), y, table, slopes, np.ascontiguousarray(scales[:, c]))[0]
         rms[c] = float(np.sqrt(np.mean(r**2))) if len(r) else np.nan
     return ScaleFit(names, scales, observed, rms, len(y_all), method)
 

@@ -208,6 +208,11 @@ class CameraResponse:
             value[..., c], slope[..., c] = self.channel_and_derivative(xs[..., c], c)
         return value, slope
 
+    def channel_table(self, channel: int) -> tuple[F64, F64]:
+        """``(f⁻¹ table (256,), slopes (255,))`` of one channel, contiguous: ``f`` is linear between the table's
+        entries with these slopes (what jitted callers of the response need)."""
+        return np.ascontiguousarray(self.inverse[:, channel]), np.ascontiguousarray(self._slopes[:, channel])
+
     def channel_and_derivative(self, x: NDArray[np.floating], channel: int) -> tuple[F64, F64]:
         """``(f_c(x), f_c'(x))`` of one colour channel ``c`` for exposures ``x`` of any shape."""
         table = self.inverse[:, channel]
