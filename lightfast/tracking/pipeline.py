@@ -65,8 +65,10 @@ class TrackerConfig(TrackingConfig):
         "frame-to-model step, which always runs down to finest_level.", min=0, max=5
     )
     f2m_iterations: tuple[int, ...] = param(
-        (10, 5, 5), description="Gauss-Newton iterations per level of the f2m step, coarse to fine (it starts at "
-        "T≈, close to the solution).", min=1, max=200
+        (10, 10, 5), description="Gauss-Newton iterations per level of the f2m step, coarse to fine (it starts at "
+        "T≈, close to the solution). Against a half-resolution reference (daylight_relight_node's reference_scale "
+        "0.5) the alignment stops at level 1, the reference's resolution, and the last entry is not used.",
+        min=1, max=200
     )
     pose_prior_weight: float = param(
         0.3, description="f2f: weight per associated pixel of a prior at the constant-velocity prediction (per m^2 and "
