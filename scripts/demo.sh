@@ -86,13 +86,12 @@ pids+=($recorder)
 for _ in $(seq 600); do grep -q "patches; site" "$logs/sun_update_node.log" && break; sleep 0.5; done
 # the clock runs $preroll s before the first frame: time for the first sun update epoch to stream in
 echo "== playing $seq_dir/bag at rate $rate with /clock ($preroll s preroll)"
-children_cpu_seconds
-player_before=$children_cpu
 "$lf" -v bag play "$seq_dir/bag" --rate "$rate" --clock --preroll "$preroll" --wait-for-subscribers 120 \
-  --topics /camera/color/image_raw /camera/color/camera_info /camera/depth/image_raw 2>"$logs/player.log" &
+  --topics /camera/color/image_raw /camera/color/camera_info /camera/depth/image_raw >"$logs/player.log" 2>&1 &
 player=$!
 pids+=($player)
-# each process's CPU time from the first frame on (the player waits for its subscribers, then runs the preroll)
+# each process's CPU time from the first frame on (the player waits for its subscribers, then runs the preroll; it
+# reports its own CPU time from the first frame on)
 names=(sun_update_node daylight_relight_node rgbd_tracker_node recorder)
 cpu_before=()
 for _ in $(seq 3000); do
@@ -106,8 +105,7 @@ cpu_line="CPU seconds from the first frame on:"
 for i in "${!names[@]}"; do
   cpu_line+=" ${names[$i]} $(awk -v a="${cpu_before[$i]}" -v b="$(cpu_seconds "${pids[$i]}")" 'BEGIN {printf "%.1f", b - a}'),"
 done
-children_cpu_seconds
-cpu_line+=" player $(awk -v a="$player_before" -v b="$children_cpu" 'BEGIN {printf "%.1f", b - a}') (with its preroll)"
+cpu_line+=" player $(sed -n 's/.*, \([0-9.]*\) s CPU$/\1/p' "$logs/player.log" | tail -1)"
 
 kill -INT "$recorder"
 wait "$recorder" || true

@@ -30,11 +30,3 @@ cpu_seconds() {  # cpu_seconds PID: user + system CPU seconds the process has us
   stat=${stat##*) }  # the fields after "pid (comm) "; utime and stime are the 12th and 13th of them
   awk -v hz="$(getconf CLK_TCK)" '{printf "%.2f", ($12 + $13) / hz}' <<<"$stat"
 }
-children_cpu_seconds() {  # sets children_cpu to the CPU seconds of this shell's waited-for children (bash `times`)
-  local f  # call it directly, not in $(...) or a pipe: a subshell would report its own (no) children
-  f=$(mktemp)
-  times >"$f"
-  children_cpu=$(tail -1 "$f" | awk '{n = 0; for (i = 1; i <= 2; i++) {split($i, a, /[ms]/); n += a[1] * 60 + a[2]}
-                                      printf "%.2f", n}')
-  rm -f "$f"
-}

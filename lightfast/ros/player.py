@@ -54,7 +54,9 @@ class PlayOptions(Config):
 
 @dataclass(frozen=True)
 class PlayReport:
-    """What a replay did. ``realtime_factor`` is bag time played over wall time taken."""
+    """What a replay did. ``wall_duration_s`` and ``cpu_s`` (the CPU time of the player's process, all threads) count
+    from the first message on: the wait for subscribers and the clock preroll are not in them. ``realtime_factor`` is
+    bag time played over that wall time."""
 
     published: dict[str, int]
     bag_duration_s: float
@@ -62,6 +64,7 @@ class PlayReport:
     loops: int
     acknowledged: bool
     interrupted: bool
+    cpu_s: float = 0.0
 
     @property
     def message_count(self) -> int:
@@ -77,7 +80,7 @@ class PlayReport:
         flags += ", interrupted" if self.interrupted else ""
         return (
             f"played {self.message_count} messages on {len(self.published)} topics, {self.bag_duration_s:.2f} s of "
-            f"bag in {self.wall_duration_s:.2f} s ({rate}{flags})"
+            f"bag in {self.wall_duration_s:.2f} s ({rate}{flags}), {self.cpu_s:.2f} s CPU"
         )
 
 
@@ -155,7 +158,8 @@ def _play(reader: BagReader, node: Node, options: PlayOptions, stop: threading.E
     published: Counter[str] = Counter({t: 0 for t in topics})
     loops = 0
     bag_time_played_ns = 0
-    wall_start = time.monotonic()
+    wall_start: float | None = None  # wall and CPU time from the first message on
+    cpu_start = 0.0
     while not stop.is_set():
         loops += 1
         first_ns: int | None = None
@@ -167,6 +171,8 @@ def _play(reader: BagReader, node: Node, options: PlayOptions, stop: threading.E
                 if loops == 1 and options.preroll_s > 0 and clock.publisher is not None:
                     _preroll(clock, first_ns, options, stop)
                     wall0 = time.monotonic()
+                if wall_start is None:
+                    wall_start, cpu_start = time.monotonic(), time.process_time()
                 log.info("playing from bag time %d (loop %d)", first_ns, loops)
                 clock.publish(first_ns)
             if options.rate > 0:
@@ -187,7 +193,8 @@ def _play(reader: BagReader, node: Node, options: PlayOptions, stop: threading.E
             bag_time_played_ns += last_ns - first_ns
         if not options.loop or first_ns is None:
             break
-    wall_s = time.monotonic() - wall_start
+    wall_s = time.monotonic() - wall_start if wall_start is not None else 0.0
+    cpu_s = time.process_time() - cpu_start if wall_start is not None else 0.0
 
     acknowledged = True
     for name, pub in publishers.items():
@@ -206,4 +213,5 @@ def _play(reader: BagReader, node: Node, options: PlayOptions, stop: threading.E
         loops=loops,
         acknowledged=acknowledged,
         interrupted=stop.is_set(),
+        cpu_s=cpu_s,
     )

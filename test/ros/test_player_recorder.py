@@ -82,6 +82,26 @@ def test_rate_start_offset_and_clock(tmp_path, make_node, executor) -> None:
     assert spin_until(executor, lambda: bool(clocks) and clocks[-1] == T0 + 390_000_001, timeout_s=5.0)
     assert clocks == sorted(clocks)
     assert clocks[0] == T0 + 200_000_000  # the first message's time: the offset skipped 0.2 s
+    assert 0.0 < report.cpu_s < 5.0
+
+
+def test_preroll_runs_the_clock_before_the_first_message(tmp_path, make_node, executor) -> None:
+    """The clock runs from preroll_s before the first message, at the playback rate; the report's wall and CPU time
+    count from the first message on."""
+    src = make_bag(tmp_path / "src", n=10, period_ns=10_000_000)
+    clocks: list[int] = []
+    sub_node = make_node("clock_probe")
+    sub_node.create_subscription(Clock, "/clock", lambda m: clocks.append(stamp_to_ns(m.clock)), 100)
+    executor.add_node(sub_node)
+    t0 = time.monotonic()
+    thread, out = play_in_thread(src, make_node("player"), PlayOptions(rate=2.0, clock_hz=100.0, preroll_s=0.6))
+    assert spin_until(executor, lambda: not thread.is_alive(), timeout_s=20.0)
+    wall = time.monotonic() - t0
+    report = out["report"]
+    assert wall >= 0.3 + 0.045  # 0.6 s of preroll and 0.09 s of bag at rate 2
+    assert report.wall_duration_s == pytest.approx(0.045, abs=0.04)
+    assert spin_until(executor, lambda: bool(clocks) and clocks[-1] == T0 + 90_000_001, timeout_s=5.0)
+    assert clocks[0] < T0  # the subscriber saw the clock run before the first message
 
 
 def test_loop_until_stopped(tmp_path, make_node, executor) -> None:
