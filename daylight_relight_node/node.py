@@ -55,6 +55,7 @@ from lightfast.ros.params import ConfigParameters
 from lightfast.ros.qos import SENSOR_QOS
 from lightfast.ros.runtime import run_node
 from lightfast.ros.sync import ExactTimePairs
+from lightfast.ros.worker import StepWorker
 from lightfast.topics import (
     COARSE_POSE_TOPIC,
     COLOR_INFO_TOPIC,
@@ -126,10 +127,7 @@ class DaylightRelightNode(Node):
         self.create_subscription(PoseStamped, COARSE_POSE_TOPIC, self._on_pose, SENSOR_QOS)
         self.create_subscription(PointCloud2, SUN_CHUNK_TOPIC, self._on_chunk, CHUNK_QOS)
         self.status_timer = self.create_timer(STATUS_PERIOD_S, self._heartbeat)
-        self._wake = threading.Event()
-        self._stopping = threading.Event()
-        self._worker = threading.Thread(target=self._work, name="relight", daemon=True)
-        self._worker.start()
+        self._worker = StepWorker("relight", self._work_once, self._on_step_error)
         self.get_logger().info(
             f"lighting map {cfg.lighting_map}: {lmap.num_vertices} vertices; camera response {cfg.crf_file}; "
             f"reference {cfg.reference}, method {cfg.method}; waiting for the first complete sun epoch"
@@ -215,7 +213,7 @@ class DaylightRelightNode(Node):
         while len(self._queue) > MAX_QUEUED:
             self._queue.popleft()
             self.stats["dropped_behind"] += 1
-        self._wake.set()
+        self._worker.wake()
 
     def _on_camera_info(self, msg: CameraInfo) -> None:
         try:
@@ -242,33 +240,20 @@ class DaylightRelightNode(Node):
         if complete is not None:
             with self._lock:
                 self._new_sun = (complete, epoch)
-            self._wake.set()
+            self._worker.wake()
 
     def _on_config(self, cfg: RelightConfig) -> None:
         with self._lock:
             self._new_config = cfg
-        self._wake.set()
+        self._worker.wake()
 
     # ---------------------------------------------------------------------------------------------- worker
 
-    def _work(self) -> None:
-        """The worker thread: relight whatever is queued whenever an input wakes it, until the node stops."""
-        while not self._stopping.is_set():
-            self._wake.wait()
-            self._wake.clear()  # before the work: a wake-up during it runs it again
-            more = True
-            while more and not self._stopping.is_set():
-                try:
-                    more = self._work_once()
-                except Exception as exc:  # a safety net: a dead worker would stop the references silently
-                    self._problem("internal", f"relight step failed: {exc!r}", Level.ERROR)
-                    more = False
+    def _on_step_error(self, exc: Exception) -> None:
+        self._problem("internal", f"relight step failed: {exc!r}", Level.ERROR)
 
     def destroy_node(self) -> None:
-        self._stopping.set()
-        self._wake.set()
-        if self._worker is not threading.current_thread():
-            self._worker.join(timeout=5.0)
+        self._worker.stop()
         super().destroy_node()
 
     def _work_once(self) -> bool:

@@ -28,7 +28,6 @@ import sys
 import threading
 import time
 from collections import OrderedDict, deque
-from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -54,6 +53,7 @@ from lightfast.ros.params import ConfigParameters
 from lightfast.ros.qos import SENSOR_QOS
 from lightfast.ros.runtime import run_node
 from lightfast.ros.sync import ExactTimePairs
+from lightfast.ros.worker import StepWorker
 from lightfast.topics import (
     COARSE_POSE_TOPIC,
     COLOR_INFO_TOPIC,
@@ -138,9 +138,6 @@ class RGBDTrackerNode(Node):
         self.params.on_change = self._on_config
         self.stats = {"frames_in": 0, "frames_tracked": 0, "f2m": 0, "f2f": 0, "dropped_behind": 0,
                       "dropped_unpaired": 0, "late_references": 0, "superseded_references": 0, "bad_inputs": 0}
-        self._wake_f2f = threading.Event()
-        self._wake_f2m = threading.Event()
-        self._stopping = threading.Event()
 
         self.coarse_pub = self.create_publisher(PoseStamped, COARSE_POSE_TOPIC, SENSOR_QOS)
         self.pose_pub = self.create_publisher(PoseStamped, TRACKER_POSE_TOPIC, SENSOR_QOS)
@@ -153,14 +150,9 @@ class RGBDTrackerNode(Node):
         sub(Image, REFERENCE_COLOR_TOPIC, self._on_ref_color, SENSOR_QOS)
         sub(Image, REFERENCE_DEPTH_TOPIC, self._on_ref_depth, SENSOR_QOS)
         sub(PoseStamped, TRACKER_RESET_TOPIC, self._on_reset, SENSOR_QOS)
-        self._workers = [
-            threading.Thread(target=self._worker, args=(self._wake_f2f, self._work, True), name="tracker-f2f",
-                             daemon=True),
-            threading.Thread(target=self._worker, args=(self._wake_f2m, self._refine_work, False),
-                             name="tracker-f2m", daemon=True),
-        ]
-        for t in self._workers:
-            t.start()
+        self._f2f_worker = StepWorker("tracker-f2f", self._work, self._on_step_error,
+                                      period_s=lambda: self._deadline_period(self.config))
+        self._f2m_worker = StepWorker("tracker-f2m", self._refine_work, self._on_step_error)
         self.get_logger().info(f"mode {cfg.mode}, reference timeout {cfg.reference_timeout_s} s, start pose "
                                f"{list(cfg.initial_pose)}; kernels warmed up in {warm_s:.2f} s")
 
@@ -215,7 +207,7 @@ class RGBDTrackerNode(Node):
         while len(self._frames) > MAX_QUEUED:
             self._frames.popleft()
             self.stats["dropped_behind"] += 1
-        self._wake_f2f.set()
+        self._f2f_worker.wake()
 
     def _on_ref_color(self, msg: Image) -> None:
         try:
@@ -238,7 +230,7 @@ class RGBDTrackerNode(Node):
     def _enqueue_ref(self, stamp: int, pair: tuple[np.ndarray, np.ndarray] | None) -> None:
         if pair is not None:
             self._ref_queue.append((stamp, *pair))
-            self._wake_f2m.set()
+            self._f2m_worker.wake()
 
     def _on_camera_info(self, msg: CameraInfo) -> None:
         try:
@@ -259,39 +251,21 @@ class RGBDTrackerNode(Node):
             return
         with self._lock:
             self._reset = (T, stamp or None)
-        self._wake_f2f.set()
+        self._f2f_worker.wake()
 
     def _on_config(self, cfg: TrackerConfig) -> None:
         with self._lock:
             self._new_config = cfg
-        self._wake_f2f.set()
+        self._f2f_worker.wake()
 
     # ---------------------------------------------------------------------------------------------- workers
 
-    def _worker(self, wake: threading.Event, step: Callable[[], bool], periodic: bool) -> None:
-        """Run ``step`` whenever ``wake`` is set (and every deadline period if ``periodic``) until the node stops;
-        ``step`` returns whether work is left. An error in a step is reported and the worker goes on."""
-        while not self._stopping.is_set():
-            wake.wait(self._deadline_period(self.config) if periodic else None)
-            wake.clear()  # before the step: a wake-up during the step runs it again
-            if self._stopping.is_set():
-                return
-            more = True
-            while more and not self._stopping.is_set():
-                try:
-                    more = step()
-                except Exception as exc:  # a safety net: a dead worker thread would stop tracking silently
-                    self._problem("internal", f"{threading.current_thread().name} step failed: {exc!r}",
-                                  Level.ERROR)
-                    more = False
+    def _on_step_error(self, exc: Exception) -> None:
+        self._problem("internal", f"{threading.current_thread().name} step failed: {exc!r}", Level.ERROR)
 
     def destroy_node(self) -> None:
-        self._stopping.set()
-        self._wake_f2f.set()
-        self._wake_f2m.set()
-        for t in self._workers:
-            if t is not threading.current_thread():
-                t.join(timeout=5.0)
+        self._f2f_worker.stop()
+        self._f2m_worker.stop()
         super().destroy_node()
 
     def _work(self) -> bool:
