@@ -55,6 +55,7 @@ assumption made here.
 """
 from __future__ import annotations
 
+import functools
 import math
 import time
 from collections.abc import Iterable
@@ -200,23 +201,46 @@ class RGBDFrame:
     pyramid_levels: int
     resolution_scale: float
 
-    @property
-    def num_valid(self) -> int:
-        """Pixels with valid depth at the finest level."""
-        return len(self.levels[0].points)
 
-
-@dataclass(frozen=True)
 class _Level:
-    camera: PinholeCamera
-    grey: NDArray[np.float32]  # (H, W)
-    depth: NDArray[np.float32]  # (H, W), 0 = invalid
-    # source role: valid pixels
-    points: NDArray[np.float32]  # (N, 3)
-    point_grey: NDArray[np.float32]  # (N,)
-    # target role
-    grey_grad: NDArray[np.float32]  # (H, W, 3): I, dI/du, dI/dv
-    geometry: NDArray[np.float32]  # (H, W, 7): depth, vertex xyz, normal xyz (NaN where undefined)
+    """One pyramid level of a prepared frame. Its vertex, normal and gradient maps and its source points are
+    computed when an alignment first uses them: the full-resolution level of a live frame often serves neither
+    f2f (which stops at level 1) nor f2m against a half-resolution reference."""
+
+    def __init__(self, camera: PinholeCamera, grey: NDArray[np.float32], depth: NDArray[np.float32],
+                 point_step: int) -> None:
+        self.camera = camera
+        self.grey = grey  # (H, W)
+        self.depth = depth  # (H, W), 0 = invalid
+        self._point_step = point_step
+
+    @functools.cached_property
+    def geometry(self) -> NDArray[np.float32]:
+        """(H, W, 7): depth, vertex xyz, normal xyz (NaN where undefined) — the target role."""
+        cam = self.camera
+        return _geometry_map(self.depth, cam.fx, cam.fy, cam.cx, cam.cy)
+
+    @functools.cached_property
+    def _source(self) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
+        return _source_points(self.geometry, self.grey, self._point_step)
+
+    @property
+    def points(self) -> NDArray[np.float32]:
+        """(N, 3) vertices of the source pixels with depth."""
+        return self._source[0]
+
+    @property
+    def point_grey(self) -> NDArray[np.float32]:
+        """(N,) grey values of the source points."""
+        return self._source[1]
+
+    @functools.cached_property
+    def grey_grad(self) -> NDArray[np.float32]:
+        """(H, W, 3): I, dI/du, dI/dv — the target role."""
+        grey = self.grey
+        gu = cv2.Sobel(grey, cv2.CV_32F, 1, 0, ksize=3, borderType=cv2.BORDER_REPLICATE) * np.float32(0.125)
+        gv = cv2.Sobel(grey, cv2.CV_32F, 0, 1, ksize=3, borderType=cv2.BORDER_REPLICATE) * np.float32(0.125)
+        return np.ascontiguousarray(np.stack([grey, gu, gv], axis=-1))
 
 
 def _to_grey(rgb: NDArray[np.generic], name: str) -> NDArray[np.float32]:
@@ -340,21 +364,7 @@ def _prepare(rgb: ArrayLike, depth_m: ArrayLike, camera: PinholeCamera, cfg: Tra
             raise TrackingError(
                 f"image too small for {cfg.pyramid_levels} pyramid levels: level {level} is {grey.shape}"
             )
-        geometry = _geometry_map(depth, cam.fx, cam.fy, cam.cx, cam.cy)
-        points, point_grey = _source_points(geometry, grey, cfg.finest_point_step if level == 0 else 1)
-        gu = cv2.Sobel(grey, cv2.CV_32F, 1, 0, ksize=3, borderType=cv2.BORDER_REPLICATE) * np.float32(0.125)
-        gv = cv2.Sobel(grey, cv2.CV_32F, 0, 1, ksize=3, borderType=cv2.BORDER_REPLICATE) * np.float32(0.125)
-        levels.append(
-            _Level(
-                camera=cam,
-                grey=grey,
-                depth=depth,
-                points=points,
-                point_grey=point_grey,
-                grey_grad=np.ascontiguousarray(np.stack([grey, gu, gv], axis=-1)),
-                geometry=geometry,
-            )
-        )
+        levels.append(_Level(cam, grey, depth, cfg.finest_point_step if level == 0 else 1))
     return RGBDFrame(tuple(levels), camera, cfg.pyramid_levels, cfg.resolution_scale)
 
 
