@@ -207,6 +207,7 @@ class _Estimate:
     stamp: float  # when it was published
     usable: bool  # a converged fast alignment or a fine one has been reached (motions may be issued)
     complete: bool  # the alignment of observation ``seq`` has finished (fine done or failed, or fine disabled)
+    observation: _Observation  # the cloud it was computed on (``seq`` moves on when a failed fine step keeps it)
 
 
 class AlignmentJob:
@@ -579,14 +580,15 @@ class RacrScheme:
                 obs.done = complete
                 usable = converged or (est is not None and est.usable)
                 self._estimate = _Estimate(result.T_ref_cur.copy(), result.sigma, "fast", obs.seq, now, usable,
-                                           complete)
+                                           complete, obs)
                 if not converged:
                     logger.debug("fast alignment not converged after %d iterations; continuing", result.iterations)
                 elif not result.converged:
                     logger.debug("fast alignment settled: it repeats its last result on this cloud")
             else:
                 self._fast_converged = False
-                self._estimate = _Estimate(result.T_ref_cur.copy(), result.sigma, "fine", obs.seq, now, True, True)
+                self._estimate = _Estimate(result.T_ref_cur.copy(), result.sigma, "fine", obs.seq, now, True, True,
+                                           obs)
                 obs.done = True
             self._wake.notify_all()
 
@@ -606,6 +608,17 @@ class RacrScheme:
                     and abs(result.sigma - sigma_prev) <= k * self.fast_config.scale_tolerance):
                 return True
         return False
+
+    def aligned_observation(self) -> tuple[Array, Array | None] | None:
+        """The cloud the current estimate was computed on, mapped into the reference frame by it:
+        ``(p_ref = R (σ p) + t (N, 3), intensities)``; None before an estimate. (Mapping the newest cloud instead
+        shifts it by whatever the camera moved since the estimate's cloud was taken.)"""
+        with self._lock:
+            est = self._estimate
+        if est is None:
+            return None
+        R, t = est.T_ref_cur[:3, :3], est.T_ref_cur[:3, 3]
+        return (est.sigma * est.observation.points) @ R.T + t, est.observation.intensities
 
     # ------------------------------------------------------------------ status
     @property

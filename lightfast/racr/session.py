@@ -220,7 +220,6 @@ class RacrSession:
         self._lock = threading.RLock()
         self._vse_pose: tuple[Array, float] | None = None  # latest raw (VSE units)
         self._observation: _VseObservation | None = None  # latest raw
-        self._scaled: _VseObservation | None = None  # latest handed to the scheme (real scale)
         self._hand: tuple[Array, float] | None = None  # latest reported hand pose
         self._counts = {"vse_poses": 0, "vse_observations": 0, "stops": 0}
         self._motions_issued = 0
@@ -401,9 +400,7 @@ class RacrSession:
         s = self._scale
         assert s is not None
         kfs = tuple(Keyframe(k.image, _scaled_pose(np.array(k.T_cur_cam), s), k.camera) for k in obs.keyframes)
-        scaled = _VseObservation(obs.stamp, obs.points * s, obs.intensities, _scaled_pose(obs.T_vse_cam, s), kfs)
-        self._scaled = scaled
-        return scaled
+        return _VseObservation(obs.stamp, obs.points * s, obs.intensities, _scaled_pose(obs.T_vse_cam, s), kfs)
 
     @staticmethod
     def _hand_to_scheme(scheme: RacrScheme, obs: _VseObservation) -> None:
@@ -411,19 +408,15 @@ class RacrSession:
 
     # ------------------------------------------------------------------ inspection
     def aligned_cloud(self) -> tuple[NDArray[np.float32], NDArray[np.float32] | None] | None:
-        """The newest observation mapped into the reference frame by the latest estimate,
+        """The observation of the latest estimate mapped into the reference frame by it,
         ``p_ref = R_p (σ_p s p_VSE) + t_p`` (float32 metres) with its intensities; None before an estimate."""
         with self._lock:
-            scheme, obs = self._scheme, self._scaled
-        if scheme is None or obs is None:
+            scheme = self._scheme
+        aligned = None if scheme is None else scheme.aligned_observation()
+        if aligned is None:
             return None
-        st = scheme.status
-        if st.T_ref_cur is None or st.sigma is None:
-            return None
-        R, t = st.T_ref_cur[:3, :3], st.T_ref_cur[:3, 3]
-        pts = (st.sigma * obs.points) @ R.T + t
-        inten = None if obs.intensities is None else obs.intensities.astype(np.float32)
-        return pts.astype(np.float32), inten
+        pts, inten = aligned
+        return pts.astype(np.float32), None if inten is None else inten.astype(np.float32)
 
     def camera_pose_in_reference(self) -> Array | None:
         """The current camera pose in the reference frame from the latest VSE pose and estimate (§3.1's T̃_A),

@@ -244,6 +244,26 @@ def test_a_failing_alignment_is_reported_and_the_thread_goes_on(scene, reference
         assert scheme.status.stage == "moving"
 
 
+def test_the_aligned_observation_is_the_cloud_of_the_estimate(scene, reference) -> None:
+    """The inspection cloud maps the observation the estimate was computed on, not a newer one that came since."""
+    from scipy.spatial import cKDTree
+
+    platform, vse = Platform(), Vse(scene)
+    with RacrScheme(reference, T_REF_CAM, X_EST, fine_config=FINE) as scheme:
+        assert scheme.aligned_observation() is None
+        vse.send(scheme, platform.T_ref_cam, None, cloud=True)
+        deadline = time.monotonic() + 20.0
+        while scheme.next_hand_motion() is None and time.monotonic() < deadline:
+            time.sleep(0.01)
+        tree = cKDTree(reference.points_m)
+        aligned = scheme.aligned_observation()
+        assert aligned is not None and np.median(tree.query(aligned[0])[0]) < 0.005
+        far = np.concatenate(vse.points) + 100.0  # a newer observation, not aligned yet (and never: no overlap)
+        scheme.add_vse_observation(far, None, vse.to_current(platform.T_ref_cam), vse.keyframes)
+        again = scheme.aligned_observation()
+        assert again is not None and np.array_equal(again[0], aligned[0])
+
+
 def test_an_unexpected_error_in_the_thread_surfaces_on_the_caller_side(scene, reference, monkeypatch) -> None:
     def broken(*args, **kwargs):
         raise RuntimeError("bug in the aligner")
