@@ -52,8 +52,10 @@ _F64 = NDArray[np.float64]
 _F32 = NDArray[np.float32]
 #: Validated, flattened rays: (leading shape, origins (N, 3), directions (N, 3), t_near (N|1,), t_far (N|1,)).
 _Rays = tuple[tuple[int, ...], _F64, _F64, _F64, _F64]
-#: Batches smaller than this many rays per thread are not split across threads.
-_MIN_PARALLEL_CHUNK = 1 << 14
+#: Batches smaller than this many rays per thread are not split across threads. Measured on a 633 k-triangle map
+#: (2 threads): 19 200 rays (a 160×120 reference) took the same wall time split or not and 10 % more CPU split;
+#: 384 000 rays took 87 instead of 143 ms wall split.
+_MIN_PARALLEL_CHUNK = 1 << 15
 
 
 class RaycastError(LightfastError, ValueError):

@@ -68,7 +68,7 @@ from lightfast.topics import (
     TRACKER_RESET_TOPIC,
     TRACKER_STATUS_TOPIC,
 )
-from lightfast.tracking.pipeline import RGBDTracker, TrackerConfig, TrackResult
+from lightfast.tracking.pipeline import F2FJob, RGBDTracker, TrackerConfig, TrackResult
 from lightfast.tracking.rgbd_odometry import TrackingError, warm_up
 
 NODE_NAME = "rgbd_tracker_node"
@@ -103,12 +103,14 @@ class _Frame:
     depth_m: np.ndarray
     frame_id: str
     received: float  # time.monotonic() when the pair was complete
+    arrival_lag_ns: int  # node clock minus the image stamp when the pair was complete (>= 0)
 
 
 @dataclass
 class _Pending:
     frame_id: str
     received: float
+    arrival_lag_ns: int
     coarse_at: float  # time.monotonic() when T≈ was published: the reference deadline counts from here
 
 
@@ -203,7 +205,8 @@ class RGBDTrackerNode(Node):
         if pair is None:
             return
         (rgb, frame_id), depth = pair
-        self._frames.append(_Frame(stamp, rgb, depth, frame_id, time.monotonic()))
+        lag_ns = max(0, self.get_clock().now().nanoseconds - stamp)
+        self._frames.append(_Frame(stamp, rgb, depth, frame_id, time.monotonic(), lag_ns))
         while len(self._frames) > MAX_QUEUED:
             self._frames.popleft()
             self.stats["dropped_behind"] += 1
@@ -284,8 +287,11 @@ class RGBDTrackerNode(Node):
             if reset is not None:
                 self._apply_reset(*reset)
             self._finish_overdue()
-            if frame is not None:
-                self._track(frame, camera)
+            job = self._start_track(frame, camera) if frame is not None else None
+        if job is not None:
+            job.run()  # the alignment, outside the lock: f2m jobs start and finish meanwhile
+            with self._state:
+                self._finish_track(job, frame)
         return more
 
     def _refine_work(self) -> bool:
@@ -331,28 +337,39 @@ class RGBDTrackerNode(Node):
         self._last_pose = T
         self._publish_status(Level.OK, "tracking reset", {"stamp_ns": stamp, "source": "reset", "reason": ""})
 
-    def _track(self, f: _Frame, camera: PinholeCamera | None) -> None:
+    def _start_track(self, f: _Frame, camera: PinholeCamera | None) -> F2FJob | None:
         stamp = f.stamp_ns
         if camera is None:
             self._problem("no_camera_info", f"frame {stamp} not tracked: no camera_info on {COLOR_INFO_TOPIC} yet",
                           stamp_ns=stamp)
-            return
+            return None
         if f.rgb.shape[:2] != camera.shape or f.depth_m.shape != camera.shape:
             self._problem("size", f"frame {stamp} not tracked: colour {f.rgb.shape[1]}x{f.rgb.shape[0]}, depth "
                           f"{f.depth_m.shape[1]}x{f.depth_m.shape[0]}, camera_info {camera.width}x{camera.height}",
                           stamp_ns=stamp)
-            return
+            return None
         if self.tracker is None:
             self.tracker = RGBDTracker(camera, config=self.config)
             self.tracker.reset(self._start_pose)
         try:
-            est = self.tracker.track_coarse(stamp, f.rgb, f.depth_m)
+            return self.tracker.start_coarse(stamp, f.rgb, f.depth_m)
+        except TrackingError as exc:
+            self._problem("track", f"frame {stamp} not tracked: {exc}", stamp_ns=stamp)
+            return None
+
+    def _finish_track(self, job: F2FJob, f: _Frame) -> None:
+        stamp = f.stamp_ns
+        if self.tracker is None:
+            return  # only this thread restarts the tracker; kept for the type checker
+        try:
+            est = self.tracker.finish_coarse(job)
         except TrackingError as exc:
             self._problem("track", f"frame {stamp} not tracked: {exc}", stamp_ns=stamp)
             return
         self.stats["frames_tracked"] += 1
         self._last_pose = est.T_map_cam
-        self._pending[stamp] = _Pending(f.frame_id or OPTICAL_FRAME, f.received, time.monotonic())
+        self._pending[stamp] = _Pending(f.frame_id or OPTICAL_FRAME, f.received, f.arrival_lag_ns,
+                                        time.monotonic())
         try:
             self.coarse_pub.publish(matrix_to_pose_stamped(est.T_map_cam, stamp_ns=stamp, frame_id=MAP_FRAME))
         except ConversionError as exc:
@@ -419,7 +436,10 @@ class RGBDTrackerNode(Node):
         except ConversionError as exc:
             self._problem("publish", f"pose of frame {r.stamp_ns} not published: {exc}", Level.ERROR, r.stamp_ns)
             return
-        latency_ns = self.get_clock().now().nanoseconds - r.stamp_ns
+        # image stamp -> here: the node clock's lag when the frame arrived, plus the wall time since. (The node clock
+        # alone would do with a wall clock; on sim time it only advances with /clock messages, one per frame.)
+        pipeline_s = time.monotonic() - p.received
+        latency_ns = p.arrival_lag_ns + round(1e9 * pipeline_s)
         values = {
             "stamp_ns": r.stamp_ns,
             "source": r.source,
@@ -429,8 +449,8 @@ class RGBDTrackerNode(Node):
             "f2f_converged": r.f2f.converged if r.f2f is not None else None,
             "f2m_inlier_ratio": r.f2m.inlier_ratio if r.f2m is not None else None,
             "f2m_converged": r.f2m.converged if r.f2m is not None else None,
-            "latency_ms": 1e-6 * latency_ns,  # node clock (sim time with use_sim_time) minus the image stamp
-            "pipeline_ms": 1e3 * (time.monotonic() - p.received),  # wall time from the paired frame to here
+            "latency_ms": 1e-6 * latency_ns,
+            "pipeline_ms": 1e3 * pipeline_s,  # wall time from the paired frame to here
         }
         level = Level.OK if r.source == "f2m" else Level.WARN
         self._publish_status(level, r.source + (f": {r.reason}" if r.reason else ""), values, stamp_ns=r.stamp_ns)

@@ -16,6 +16,8 @@
 #   MODE             tracker mode: proposed | refl-f2m | depth-only | no-color-f2m (default proposed)
 #   RATE             playback rate (default 1 = real time)
 #   TRACKER_PARAMS   extra rgbd_tracker_node parameters, e.g. "finest_point_step:=2 f2m_iterations:=[4,3,2]"
+#   RECORD_TOPICS    topics to record (default: what the scoring reads, /tracker/pose, both status topics, the sun
+#                    chunks and direction; "all": also the coarse pose, odometry and the brightness scales)
 #   ROS_DOMAIN_ID    DDS domain (default: a random id)
 set -euo pipefail
 root=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
@@ -76,8 +78,13 @@ for kv in ${TRACKER_PARAMS:-}; do tracker_params+=(-p "$kv"); done
 pids+=($!)
 
 recorded="$out/demo-output"
-topics=(/tracker/pose /tracker/coarse_pose /tracker/odometry /tracker/status /relight/status
-        /relight/scale/sun /relight/scale/sky /relight/scale/ground /sun/direction /radiosity/sun_chunk)
+# the recorder is one more process on the two cores: by default it takes only what the scoring below reads
+topics=(/tracker/pose /tracker/status /relight/status /sun/direction /radiosity/sun_chunk)
+if [[ "${RECORD_TOPICS:-}" == all ]]; then
+  topics+=(/tracker/coarse_pose /tracker/odometry /relight/scale/sun /relight/scale/sky /relight/scale/ground)
+elif [[ -n "${RECORD_TOPICS:-}" ]]; then
+  read -r -a topics <<<"$RECORD_TOPICS"
+fi
 "$lf" bag record --overwrite -o "$recorded" "${topics[@]}" >"$logs/record.log" 2>&1 &
 recorder=$!
 pids+=($recorder)
@@ -86,7 +93,8 @@ pids+=($recorder)
 for _ in $(seq 600); do grep -q "patches; site" "$logs/sun_update_node.log" && break; sleep 0.5; done
 # the clock runs $preroll s before the first frame: time for the first sun update epoch to stream in
 echo "== playing $seq_dir/bag at rate $rate with /clock ($preroll s preroll)"
-"$lf" -v bag play "$seq_dir/bag" --rate "$rate" --clock --preroll "$preroll" --wait-for-subscribers 120 \
+# /clock at 20 Hz between frames (and before each frame): every node on sim time takes each clock message
+"$lf" -v bag play "$seq_dir/bag" --rate "$rate" --clock 20 --preroll "$preroll" --wait-for-subscribers 120 \
   --topics /camera/color/image_raw /camera/color/camera_info /camera/depth/image_raw >"$logs/player.log" 2>&1 &
 player=$!
 pids+=($player)

@@ -6,8 +6,9 @@ recorded during ``lightfast bag play``, and the ground truth from the played bag
 * accuracy as in paper §IV-C: RMSE of the translation error over the frames within 10 cm / 10° of ground truth; the
   other frames count as tracking loss (a live run cannot be reset to ground truth, so a loss may last);
 * throughput: poses per second of wall time (the recorder's receive times), and frames that got no pose;
-* latency: the tracker's ``latency_ms`` (node clock at publication minus the image stamp; with ``use_sim_time``
-  the clock is the player's /clock, which runs with wall time at rate 1), median and 95th percentile;
+* latency: the tracker's ``latency_ms`` (how far the node clock was past the image stamp when the frame arrived,
+  plus the wall time from there to the pose's publication; with ``use_sim_time`` the node clock is the player's
+  /clock, which runs with wall time at rate 1), median and 95th percentile;
 * per-stage timings like paper Table II: f2f and f2m from the tracker's status, rendering and estimation from the
   relight node's status (median and mean, ms).
 """

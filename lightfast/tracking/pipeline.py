@@ -45,7 +45,7 @@ from lightfast.tracking.rgbd_odometry import (
     prepare_frame,
 )
 
-__all__ = ["CoarseEstimate", "F2MJob", "RGBDTracker", "TrackResult", "TrackerConfig"]
+__all__ = ["CoarseEstimate", "F2FJob", "F2MJob", "RGBDTracker", "TrackResult", "TrackerConfig"]
 
 log = logging.getLogger(__name__)
 
@@ -162,6 +162,38 @@ class _Pending:
 
 
 @dataclass(eq=False)
+class F2FJob:
+    """The f2f alignment of a new live frame (:meth:`RGBDTracker.start_coarse`): prepare the frame and align it to
+    the previous one from the constant-velocity prediction. :meth:`run` reads only the job's own inputs; its outcome
+    is ``frame`` and ``result`` (None for the first frame after a reset) or ``error``."""
+
+    stamp_ns: int
+    rgb: ArrayLike
+    depth_m: ArrayLike
+    camera: PinholeCamera
+    config: TrackerConfig
+    previous: tuple[int, RGBDFrame] | None  # stamp and frame of the previous frame; None: the first after a reset
+    T_prev_cur_init: NDArray[np.float64] | None
+    frame: RGBDFrame | None = None
+    result: AlignResult | None = None
+    error: TrackingError | None = None
+    seconds: float = 0.0
+
+    def run(self) -> F2FJob:
+        t0 = time.perf_counter()
+        cfg = self.config
+        try:
+            self.frame = prepare_frame(self.rgb, self.depth_m, self.camera, config=cfg, name=f"frame {self.stamp_ns}")
+            if self.previous is not None:
+                self.result = align_frames(self.frame, self.previous[1], init_T_target_source=self.T_prev_cur_init,
+                                           config=cfg.f2f_config, use_color=cfg.f2f_color, use_depth=True)
+        except TrackingError as exc:
+            self.error = exc
+        self.seconds = time.perf_counter() - t0
+        return self
+
+
+@dataclass(eq=False)
 class F2MJob:
     """The f2m alignment of one pending frame against its reference (:meth:`RGBDTracker.start_refine`): prepare the
     reference and align the frame to it. :meth:`run` reads only the job's own inputs, so it may run on another
@@ -227,31 +259,48 @@ class RGBDTracker:
             self._T_start = T.copy()
 
     def track_coarse(self, stamp_ns: int, rgb: ArrayLike, depth_m: ArrayLike) -> CoarseEstimate:
-        """f2f step for a new live frame (stamps must increase); returns T≈."""
+        """f2f step for a new live frame (stamps must increase); returns T≈. The same as :meth:`finish_coarse` of
+        :meth:`start_coarse`'s job after :meth:`F2FJob.run`."""
+        return self.finish_coarse(self.start_coarse(stamp_ns, rgb, depth_m).run())
+
+    def start_coarse(self, stamp_ns: int, rgb: ArrayLike, depth_m: ArrayLike) -> F2FJob:
+        """The f2f work of a new live frame as a job that touches no tracker state (it reads the previous frame and
+        the constant-velocity prior as they are now): run it outside the lock that guards this tracker, so that f2m
+        jobs can start and finish meanwhile, then :meth:`finish_coarse`. One f2f job at a time."""
         if not self.initialized:
             raise TrackingError("tracker has no start pose: call reset(T_map_cam) first")
         stamp = int(stamp_ns)
         if self._last is not None and stamp <= self._last[0]:
             raise TrackingError(f"frame stamp {stamp} is not after the previous frame's {self._last[0]}")
-        t0 = time.perf_counter()
-        frame = prepare_frame(rgb, depth_m, self.camera, config=self.config, name=f"frame {stamp}")
         cfg = self.config
-        if self._last is None:
-            assert self._T_start is not None
-            T, prev_stamp, T_rel, res = self._T_start.copy(), None, np.eye(4), None
+        prev = None if self._last is None else self._last[:2]
+        init = self._velocity if cfg.motion_prior == "constant-velocity" else None
+        return F2FJob(stamp, rgb, depth_m, self.camera, cfg, prev, init)
+
+    def finish_coarse(self, job: F2FJob) -> CoarseEstimate:
+        """Add the frame of a job that has run: T≈ chains its f2f motion to the previous frame's pose as it is now
+        (f2m may have refined it meanwhile). Raises the job's :class:`TrackingError`, or one if the tracker was
+        reset meanwhile."""
+        if job.error is not None:
+            raise job.error
+        assert job.frame is not None
+        stamp, res = job.stamp_ns, job.result
+        if job.previous is None:
+            if self._last is not None or self._T_start is None:
+                raise TrackingError(f"frame {stamp}: the tracker was reset or moved on while it was tracked")
+            T, prev_stamp, T_rel = self._T_start.copy(), None, np.eye(4)
             self._T_start = None
         else:
-            prev_stamp, prev_frame, T_prev = self._last
-            init = self._velocity if cfg.motion_prior == "constant-velocity" else None
-            res = align_frames(frame, prev_frame, init_T_target_source=init, config=cfg.f2f_config,
-                               use_color=cfg.f2f_color, use_depth=True)
+            prev_stamp = job.previous[0]
+            if self._last is None or self._last[0] != prev_stamp or self._last[1] is not job.previous[1]:
+                raise TrackingError(f"frame {stamp}: the tracker was reset or moved on while it was tracked")
+            assert res is not None
             T_rel = res.T_target_source
             self._velocity = T_rel if res.converged else np.eye(4)
-            T = T_prev @ T_rel
-        seconds = time.perf_counter() - t0
-        self._pending[stamp] = _Pending(frame, T.copy(), T.copy(), prev_stamp, T_rel, res, seconds)
-        self._last = (stamp, frame, T.copy())
-        return CoarseEstimate(stamp, T, res, seconds)
+            T = self._last[2] @ T_rel
+        self._pending[stamp] = _Pending(job.frame, T.copy(), T.copy(), prev_stamp, T_rel, res, job.seconds)
+        self._last = (stamp, job.frame, T.copy())
+        return CoarseEstimate(stamp, T, res, job.seconds)
 
     def expired(self) -> list[int]:
         """Stamps of pending frames beyond ``max_pending`` (oldest first): finish them with :meth:`skip_reference`."""

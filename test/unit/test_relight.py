@@ -198,6 +198,38 @@ def test_f2m_job_runs_apart_from_the_tracker_state(room, true_crf):
         tracker.start_refine(1, ref.color[:10], ref.depth_m[:10])
 
 
+def test_f2f_job_chains_to_the_pose_of_the_previous_frame_at_its_finish(room, true_crf):
+    """start_coarse → run → finish_coarse is track_coarse; a previous frame refined by f2m while the f2f job ran
+    carries the new frame along; a reset meanwhile makes the job's frame refuse to join."""
+    lmap, sun = room
+    T1 = compose(T0, se3_exp([0.01, 0.0, 0.02, 0.0, 0.01, 0.0]))
+    rgb0, d0 = live_frame(lmap, sun, true_crf, T0)
+    rgb1, d1 = live_frame(lmap, sun, true_crf, T1)
+    rl = DaylightRelighter(lmap, true_crf)
+    rl.set_sun_radiosity(sun, epoch_ns=1)
+    T_off = compose(T0, se3_exp([0.02, 0.0, 0.0, 0.0, 0.0, 0.0]))
+    ref0 = rl.step(0, rgb0, T_off, CAMERA)
+    tracker = RGBDTracker(CAMERA)
+    tracker.reset(T_off)
+    tracker.track_coarse(0, rgb0, d0)
+    job = tracker.start_coarse(1, rgb1, d1).run()
+    assert tracker.pending_stamps == [0]  # nothing changes until the job is finished
+    r0 = tracker.refine(0, ref0.color, ref0.depth_m)  # meanwhile f2m moves frame 0 from T_off to the truth
+    assert r0.source == "f2m"
+    c1 = tracker.finish_coarse(job)
+    np.testing.assert_allclose(c1.T_map_cam, r0.T_map_cam @ job.result.T_target_source, atol=1e-12)
+    E = compose(inverse(T1), c1.T_map_cam)
+    assert np.linalg.norm(E[:3, 3]) < 0.01  # the f2f error alone, not the 2 cm of T_off on top
+    job = tracker.start_coarse(2, rgb1, d1).run()
+    tracker.reset(T0)
+    with pytest.raises(TrackingError, match="reset or moved on"):
+        tracker.finish_coarse(job)
+    bad = tracker.start_coarse(3, rgb1, np.zeros_like(d1)).run()
+    with pytest.raises(TrackingError, match="no valid depth"):
+        tracker.finish_coarse(bad)
+    assert tracker.pending_stamps == []
+
+
 def test_sun_epoch_assembler_swaps_only_complete_epochs():
     a = SunEpochAssembler(10)
     B = np.arange(30, dtype=np.float32).reshape(10, 3)
