@@ -80,13 +80,23 @@ CHUNK_FIELDS = ("vertex", "r", "g", "b")
 STATUS_PERIOD_S = 1.0
 
 
+#: When a message of a frame came: time.monotonic() then, and the node clock minus the frame's stamp (>= 0, ns).
+_Arrival = tuple[float, int]
+
+
 @dataclass
 class _Frame:
     stamp_ns: int
     rgb: np.ndarray
     frame_id: str
     T_map_cam: np.ndarray
-    pose_latency_ms: float  # node clock when the coarse pose came, minus the image stamp
+    arrival: _Arrival  # the first of image and pose
+    pose_latency_ms: float  # image stamp -> coarse pose here
+
+    def latency_ms(self) -> float:
+        """Image stamp -> now: the node clock's lag when the first of image and pose came, plus the wall time since
+        (on sim time the node clock only moves with /clock messages, about one per frame)."""
+        return 1e-6 * self.arrival[1] + 1e3 * (time.monotonic() - self.arrival[0])
 
 
 class DaylightRelightNode(Node):
@@ -105,7 +115,8 @@ class DaylightRelightNode(Node):
         self.problems = ProblemLog(self._log)
 
         self._lock = threading.Lock()  # guards everything the input callbacks share with the worker
-        self._pairs: ExactTimePairs[tuple[np.ndarray, str], tuple[np.ndarray, float]] = ExactTimePairs(MAX_UNPAIRED)
+        self._pairs: ExactTimePairs[tuple[np.ndarray, str, _Arrival], tuple[np.ndarray, _Arrival]] = ExactTimePairs(
+            MAX_UNPAIRED)
         self._queue: deque[_Frame] = deque()
         self._camera: PinholeCamera | None = None
         self._read_camera_info = CameraInfoReader()
@@ -186,9 +197,10 @@ class DaylightRelightNode(Node):
         except ConversionError as exc:
             self._problem("image", f"dropped colour image on {COLOR_TOPIC}: {exc}")
             return
+        arrival = self._arrival(stamp)
         with self._lock:
             self.stats["frames_in"] += 1
-            pair = self._pairs.add_first(stamp, (rgb, msg.header.frame_id))
+            pair = self._pairs.add_first(stamp, (rgb, msg.header.frame_id, arrival))
             self._enqueue(stamp, pair)
 
     def _on_pose(self, msg: PoseStamped) -> None:
@@ -199,17 +211,23 @@ class DaylightRelightNode(Node):
         except ConversionError as exc:
             self._problem("pose", f"dropped coarse pose on {COARSE_POSE_TOPIC}: {exc}")
             return
-        latency_ms = 1e-6 * (self._now_ns() - stamp)
+        arrival = self._arrival(stamp)
         with self._lock:
             self.stats["poses_in"] += 1
-            self._enqueue(stamp, self._pairs.add_second(stamp, (T, latency_ms)))
+            self._enqueue(stamp, self._pairs.add_second(stamp, (T, arrival)))
 
-    def _enqueue(self, stamp: int, pair: tuple[tuple[np.ndarray, str], tuple[np.ndarray, float]] | None) -> None:
+    def _arrival(self, stamp: int) -> _Arrival:
+        return time.monotonic(), max(0, self._now_ns() - stamp)
+
+    def _enqueue(self, stamp: int, pair: tuple[tuple[np.ndarray, str, _Arrival], tuple[np.ndarray, _Arrival]] | None
+                 ) -> None:
         self.stats["dropped_unpaired"] = self._pairs.dropped
         if pair is None:
             return
-        (rgb, frame_id), (T, latency_ms) = pair
-        self._queue.append(_Frame(stamp, rgb, frame_id, T, latency_ms))
+        (rgb, frame_id, image_arrival), (T, pose_arrival) = pair
+        first = min(image_arrival, pose_arrival)
+        pose_latency_ms = 1e-6 * first[1] + 1e3 * (pose_arrival[0] - first[0])
+        self._queue.append(_Frame(stamp, rgb, frame_id, T, first, pose_latency_ms))
         while len(self._queue) > MAX_QUEUED:
             self._queue.popleft()
             self.stats["dropped_behind"] += 1
@@ -308,7 +326,7 @@ class DaylightRelightNode(Node):
             **{f"{k}_ms": 1e3 * v for k, v in ref.seconds.items()},
             "total_ms": 1e3 * (time.perf_counter() - t0),
             "pose_latency_ms": f.pose_latency_ms,  # image stamp -> coarse pose here (tracker f2f + transport)
-            "latency_ms": 1e-6 * (self._now_ns() - stamp),  # image stamp -> reference published
+            "latency_ms": f.latency_ms(),  # image stamp -> reference published
         }
         self._publish_status(Level.OK, "reference published", stamp_ns=stamp)
 
