@@ -98,10 +98,11 @@ def markdown(runs: list[dict], in_process_rows: list[dict], args: argparse.Names
         f"preroll for the first B̂_sun epoch, sun update restarted every {args.sun_period:g} s of sim time (niced,"
         f" in the background) so that the next epoch's chunks stream while the frames are tracked. Poses/s = poses"
         f" per second of wall time at the recorder; f2m = share of the poses refined against their relit reference"
-        f" (the others are f2f poses: their reference did not come in time); latency = tracker publication time "
-        f"minus the image stamp. Per-stage times are medians over the frames, from the nodes' status messages "
-        f"(wall time inside each node, so they include waiting for the CPU). CPU = CPU time of every process from "
-        f"the first frame on, per frame.",
+        f" (the others are f2f poses: their reference did not come in time); latency = image stamp to the "
+        f"tracker's publication (the node clock's lag when the frame arrived plus the wall time since). RMSE and "
+        f"loss as in the evaluation, except that a live run is not reset to the truth after a loss. Per-stage times "
+        f"are medians over the frames, from the nodes' status messages (wall time inside each node, so they include "
+        f"waiting for the CPU). CPU = CPU time of every process from the first frame on, per frame.",
         "",
         "| size | input fps | poses/s | f2m | latency median | latency p95 | f2f ms | rendering ms | "
         "estimation ms | f2m ms | CPU ms/frame: tracker + relight + sun + recorder + player | sun chunks "
