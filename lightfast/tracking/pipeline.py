@@ -62,7 +62,8 @@ class TrackerConfig(TrackingConfig):
                                        "long (wall time) is finished with its f2f pose.", min=0.0, max=60.0)
     f2f_finest_level: int = param(
         1, description="Pyramid level where frame-to-frame tracking stops (1: half resolution); T≈ only seeds the "
-        "frame-to-model step, which always runs down to finest_level.", min=0, max=5
+        "frame-to-model step, which runs down to finest_level (to level 1 against a half-resolution reference).",
+        min=0, max=5
     )
     f2m_iterations: tuple[int, ...] = param(
         (10, 10, 5), description="Gauss-Newton iterations per level of the f2m step, coarse to fine (it starts at "

@@ -55,7 +55,6 @@ assumption made here.
 """
 from __future__ import annotations
 
-import functools
 import math
 import time
 from collections.abc import Iterable
@@ -205,7 +204,9 @@ class RGBDFrame:
 class _Level:
     """One pyramid level of a prepared frame. Its vertex, normal and gradient maps and its source points are
     computed when an alignment first uses them: the full-resolution level of a live frame often serves neither
-    f2f (which stops at level 1) nor f2m against a half-resolution reference."""
+    f2f (which stops at level 1) nor f2m against a half-resolution reference. (Not functools.cached_property: on
+    Python 3.11 it computes under one lock per class, which made the f2f and f2m threads of the tracker node wait
+    for each other; two threads computing the same map at once both get a correct one.)"""
 
     def __init__(self, camera: PinholeCamera, grey: NDArray[np.float32], depth: NDArray[np.float32],
                  point_step: int) -> None:
@@ -213,34 +214,42 @@ class _Level:
         self.grey = grey  # (H, W)
         self.depth = depth  # (H, W), 0 = invalid
         self._point_step = point_step
+        self._geometry: NDArray[np.float32] | None = None
+        self._source: tuple[NDArray[np.float32], NDArray[np.float32]] | None = None
+        self._grey_grad: NDArray[np.float32] | None = None
 
-    @functools.cached_property
+    @property
     def geometry(self) -> NDArray[np.float32]:
         """(H, W, 7): depth, vertex xyz, normal xyz (NaN where undefined) — the target role."""
-        cam = self.camera
-        return _geometry_map(self.depth, cam.fx, cam.fy, cam.cx, cam.cy)
+        if self._geometry is None:
+            cam = self.camera
+            self._geometry = _geometry_map(self.depth, cam.fx, cam.fy, cam.cx, cam.cy)
+        return self._geometry
 
-    @functools.cached_property
-    def _source(self) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
-        return _source_points(self.geometry, self.grey, self._point_step)
+    def _source_arrays(self) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
+        if self._source is None:
+            self._source = _source_points(self.geometry, self.grey, self._point_step)
+        return self._source
 
     @property
     def points(self) -> NDArray[np.float32]:
         """(N, 3) vertices of the source pixels with depth."""
-        return self._source[0]
+        return self._source_arrays()[0]
 
     @property
     def point_grey(self) -> NDArray[np.float32]:
         """(N,) grey values of the source points."""
-        return self._source[1]
+        return self._source_arrays()[1]
 
-    @functools.cached_property
+    @property
     def grey_grad(self) -> NDArray[np.float32]:
         """(H, W, 3): I, dI/du, dI/dv — the target role."""
-        grey = self.grey
-        gu = cv2.Sobel(grey, cv2.CV_32F, 1, 0, ksize=3, borderType=cv2.BORDER_REPLICATE) * np.float32(0.125)
-        gv = cv2.Sobel(grey, cv2.CV_32F, 0, 1, ksize=3, borderType=cv2.BORDER_REPLICATE) * np.float32(0.125)
-        return np.ascontiguousarray(np.stack([grey, gu, gv], axis=-1))
+        if self._grey_grad is None:
+            grey = self.grey
+            gu = cv2.Sobel(grey, cv2.CV_32F, 1, 0, ksize=3, borderType=cv2.BORDER_REPLICATE) * np.float32(0.125)
+            gv = cv2.Sobel(grey, cv2.CV_32F, 0, 1, ksize=3, borderType=cv2.BORDER_REPLICATE) * np.float32(0.125)
+            self._grey_grad = np.ascontiguousarray(np.stack([grey, gu, gv], axis=-1))
+        return self._grey_grad
 
 
 def _to_grey(rgb: NDArray[np.generic], name: str) -> NDArray[np.float32]:
