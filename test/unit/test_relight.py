@@ -35,6 +35,13 @@ def room():
     return lmap, sun
 
 
+def ready_relighter(lmap, sun, crf) -> DaylightRelighter:
+    """A relighter with the room's B̂_sun swapped in."""
+    rl = DaylightRelighter(lmap, crf)
+    rl.set_sun_radiosity(sun, epoch_ns=1)
+    return rl
+
+
 def live_frame(lmap, sun, crf, T):
     comps = {"sun": sun, "sky": lmap.sky_radiosity, "ground": lmap.ground_radiosity}
     r = relit_image(lmap, comps, S_TRUE, T, CAMERA, crf)
@@ -42,6 +49,8 @@ def live_frame(lmap, sun, crf, T):
 
 
 T0 = look_at([2.25, 4.3, 1.6], [0.0, -2.8, -1.4])
+#: The second frame of the two-frame tracker tests: 2.2 cm and 0.6° from T0.
+T1 = compose(T0, se3_exp([0.01, 0.0, 0.02, 0.0, 0.01, 0.0]))
 
 
 def test_relighter_estimates_scales_and_renders_the_live_image(room, true_crf):
@@ -107,11 +116,9 @@ def test_relighter_rejects_bad_input(room, true_crf):
 def test_two_step_tracker_recovers_a_perturbed_pose(room, true_crf):
     """The f2m step against the relit reference pulls a wrong coarse pose back to the truth."""
     lmap, sun = room
-    T1 = compose(T0, se3_exp([0.01, 0.0, 0.02, 0.0, 0.01, 0.0]))
     rgb0, d0 = live_frame(lmap, sun, true_crf, T0)
     rgb1, d1 = live_frame(lmap, sun, true_crf, T1)
-    rl = DaylightRelighter(lmap, true_crf)
-    rl.set_sun_radiosity(sun, epoch_ns=1)
+    rl = ready_relighter(lmap, sun, true_crf)
     for mode in ("proposed", "no-color-f2m", "depth-only"):
         tracker = RGBDTracker(CAMERA, config=TrackerConfig(mode=mode))
         # start 3 cm / 1.7° off: f2f keeps the error, f2m against the map removes it
@@ -144,8 +151,7 @@ def test_tracker_pipelining_skip_and_errors(room, true_crf):
     tracker.track_coarse(0, rgb0, d0)
     c1 = tracker.track_coarse(1, rgb1, d1)  # frame 0 still waits for its reference
     assert tracker.pending_stamps == [0, 1] and tracker.expired() == [0]
-    rl = DaylightRelighter(lmap, true_crf)
-    rl.set_sun_radiosity(sun, epoch_ns=1)
+    rl = ready_relighter(lmap, sun, true_crf)
     ref0 = rl.step(0, rgb0, T_off, CAMERA)
     r0 = tracker.refine(0, ref0.color, ref0.depth_m)  # late reference of frame 0 re-chains frame 1
     assert r0.source == "f2m"
@@ -169,8 +175,7 @@ def test_f2m_job_runs_apart_from_the_tracker_state(room, true_crf):
     (reset, timeout) refuses the job's result."""
     lmap, sun = room
     rgb0, d0 = live_frame(lmap, sun, true_crf, T0)
-    rl = DaylightRelighter(lmap, true_crf)
-    rl.set_sun_radiosity(sun, epoch_ns=1)
+    rl = ready_relighter(lmap, sun, true_crf)
     T_off = compose(T0, se3_exp([0.02, 0.0, 0.0, 0.0, 0.0, 0.0]))
     ref = rl.step(0, rgb0, T_off, CAMERA)  # the first frame's T≈ is the start pose
     results = []
@@ -202,11 +207,9 @@ def test_f2f_job_chains_to_the_pose_of_the_previous_frame_at_its_finish(room, tr
     """start_coarse → run → finish_coarse is track_coarse; a previous frame refined by f2m while the f2f job ran
     carries the new frame along; a reset meanwhile makes the job's frame refuse to join."""
     lmap, sun = room
-    T1 = compose(T0, se3_exp([0.01, 0.0, 0.02, 0.0, 0.01, 0.0]))
     rgb0, d0 = live_frame(lmap, sun, true_crf, T0)
     rgb1, d1 = live_frame(lmap, sun, true_crf, T1)
-    rl = DaylightRelighter(lmap, true_crf)
-    rl.set_sun_radiosity(sun, epoch_ns=1)
+    rl = ready_relighter(lmap, sun, true_crf)
     T_off = compose(T0, se3_exp([0.02, 0.0, 0.0, 0.0, 0.0, 0.0]))
     ref0 = rl.step(0, rgb0, T_off, CAMERA)
     tracker = RGBDTracker(CAMERA)
