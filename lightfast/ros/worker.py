@@ -55,5 +55,7 @@ class StepWorker:
                 try:
                     more = self._step()
                 except Exception as exc:  # the safety net of the class docstring
+                    if self._stopping.is_set():  # the node is going away: its publishers may be gone already
+                        return
                     self._on_error(exc)
                     more = False

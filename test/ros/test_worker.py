@@ -51,3 +51,20 @@ def test_periodic_worker_runs_without_wake_ups_and_stops_promptly() -> None:
     t0 = time.monotonic()
     worker.stop()
     assert time.monotonic() - t0 < 1.0
+
+
+def test_a_step_failing_after_stop_is_not_reported() -> None:
+    """A step still running when the node stops may fail on its dead context; that is not an error to report."""
+    release, errors = threading.Event(), []
+
+    def step() -> bool:
+        release.wait(5.0)
+        raise RuntimeError("publisher's context is invalid")
+
+    worker = StepWorker("stopping", step, errors.append)
+    worker.wake()
+    time.sleep(0.05)
+    worker.stop(timeout_s=0.05)  # the step is still inside
+    release.set()
+    assert wait_for(lambda: not any(t.name == "stopping" for t in threading.enumerate()))
+    assert errors == []
