@@ -89,8 +89,13 @@ fi
 recorder=$!
 pids+=($recorder)
 
-# the sun update node logs its map once the patch transport is built: only then can it use the clock's preroll
-for _ in $(seq 600); do grep -q "patches; site" "$logs/sun_update_node.log" && break; sleep 0.5; done
+# each node logs one line once it is ready: the sun update node once its patch transport is built (only then can it
+# use the clock's preroll), the others once their kernels are compiled or loaded from numba's cache (on a fresh clone
+# that takes a minute; the player's wait for subscribers does not cover it: the tracker alone subscribes to every
+# topic it plays)
+wait_for_line "$logs/sun_update_node.log" "patches; site" "${pids[0]}"
+wait_for_line "$logs/daylight_relight_node.log" "vertices; camera response" "${pids[1]}"
+wait_for_line "$logs/rgbd_tracker_node.log" "kernels warmed up" "${pids[2]}"
 # the clock runs $preroll s before the first frame: time for the first sun update epoch to stream in
 echo "== playing $seq_dir/bag at rate $rate with /clock ($preroll s preroll)"
 # /clock at 20 Hz between frames (and before each frame): every node on sim time takes each clock message
