@@ -55,7 +55,7 @@ class VtrLocalizerConfig(Config):
                              "mcmanus (colour-constant only when grey fails).", choices=MODES, read_only=True)
     window_radius: int = param(2, description="Repeat: keyframes on each side of the nearest one in the "
                                "localization window.", min=0, max=50, read_only=True)
-    search_window_radius: int = param(0, description="Repeat: keyframes on each side of every candidate in the "
+    search_window_radius: int = param(2, description="Repeat: keyframes on each side of every candidate in the "
                                       "whole-map search (0: each keyframe alone).", min=0, max=50, read_only=True)
     min_inliers: int = param(6, description="Repeat: fewest inliers for a successful localization (paper: 6).",
                              min=4, max=10000, read_only=True)
@@ -64,7 +64,9 @@ class VtrLocalizerConfig(Config):
                                         min=0.0, max=100000.0, read_only=True)
     match_radius_px: float = param(40.0, description="Repeat: guided map matching radius under the VO prior, px "
                                    "(0: unguided).", min=0.0, max=10000.0, read_only=True)
-    ransac_threshold_px: float = param(2.0, description="Repeat: RANSAC inlier threshold on the stereo reprojection "
+    match_ratio: float = param(0.9, description="Repeat: Lowe ratio test of keyframe-to-frame matches.", min=0.0,
+                               max=1.0, read_only=True)
+    ransac_threshold_px: float = param(3.0, description="Repeat: RANSAC inlier threshold on the stereo reprojection "
                                        "error, px.", min=0.1, max=100.0, read_only=True)
     max_position_std_m: float = param(0.5, description="Repeat: a localization needs its camera position "
                                       "constrained to this standard deviation, m.", min=0.0, max=1000.0,
@@ -117,6 +119,7 @@ class VtrLocalizerConfig(Config):
             mode=self.repeat_mode, window_radius=self.window_radius, min_inliers=self.min_inliers,
             search_window_radius=self.search_window_radius,
             max_distance_on_vo_m=self.max_distance_on_vo_m, match_radius_px=self.match_radius_px,
+            ratio=self.match_ratio,
             ransac_threshold_px=self.ransac_threshold_px, max_position_std_m=self.max_position_std_m,
             prior_gate_m=self.prior_gate_m, prior_gate_per_m=self.prior_gate_per_m,
             initial_keyframe=self.initial_keyframe, workers=self.workers,

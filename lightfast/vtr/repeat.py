@@ -102,8 +102,8 @@ class RepeatConfig(Config):
         max=50,
     )
     search_window_radius: int = param(
-        0, description="Keyframes on each side of every candidate keyframe in the whole-map search (0: each keyframe "
-        "alone; 2 as window_radius doubled the candidate matches at the start of the evening repeat07).", min=0,
+        2, description="Keyframes on each side of every candidate keyframe in the whole-map search (0: each keyframe "
+        "alone; 2, as window_radius, doubled the candidate matches at the start of the evening repeat07).", min=0,
         max=50,
     )
     min_inliers: int = param(6, description="Fewest inliers for a successful localization (paper: 6).", min=4)
@@ -115,7 +115,9 @@ class RepeatConfig(Config):
         40.0, description="Guided map matching: a keyframe landmark must project within this of the current "
         "keypoint under the VO prior, px (0: unguided).", min=0.0,
     )
-    ratio: float = param(0.8, description="Lowe ratio test of keyframe-to-frame matches.", min=0.0, max=1.0)
+    ratio: float = param(0.9, description="Lowe ratio test of keyframe-to-frame matches (0.9: more candidates under "
+                         "changed lighting; the mutual check and RANSAC remove the extra wrong ones).", min=0.0,
+                         max=1.0)
     mutual: bool = param(True, description="Keep only mutually nearest keyframe-to-frame matches.")
     orb_max_distance: float = param(
         80.0, description="ORB: largest Hamming distance of a keyframe-to-frame match (of 256 bits).", min=0.0
@@ -124,12 +126,17 @@ class RepeatConfig(Config):
         300.0, description="SIFT: largest Euclidean distance of a keyframe-to-frame match.", min=0.0
     )
     ransac_threshold_px: float = param(
-        2.0, description="RANSAC inlier threshold on the stereo reprojection error (u, v, disparity), px.", min=0.1,
+        3.0, description="RANSAC inlier threshold on the stereo reprojection error (u, v, disparity), px (3: map "
+        "landmarks and live keypoints come from different stereo pairs, so their disparity errors add).", min=0.1,
         max=100.0,
     )
     ransac_iterations: int = param(1000, description="Most RANSAC hypotheses.", min=10, max=100000)
     ransac_confidence: float = param(0.999, description="RANSAC confidence (adaptive stop).", min=0.5,
                                      max=0.999999)
+    ransac_consistent_fraction: float = param(
+        0.0, description="Share of RANSAC hypotheses drawn from distance-consistent triples of matches (the rest "
+        "uniformly): finds the few inliers among many matches under changed lighting.", min=0.0, max=1.0,
+    )
     max_position_std_m: float = param(
         0.5, description="A localization also needs its camera position constrained to this standard deviation "
         "(nominal 1 px noise), m: rejects poses resting on far points only.", min=0.0,
@@ -288,7 +295,7 @@ class MapLocalizer:
         est = estimate_pose_stereo(
             np.concatenate(objs), np.concatenate(imgs), np.concatenate(disps), camera,
             threshold_px=c.ransac_threshold_px, iterations=c.ransac_iterations, confidence=c.ransac_confidence,
-            min_inliers=c.min_inliers,
+            min_inliers=c.min_inliers, consistent_fraction=c.ransac_consistent_fraction,
         )
         lab = np.concatenate(labels)
         counts = np.bincount(lab[est.inliers], minlength=len(sources))
