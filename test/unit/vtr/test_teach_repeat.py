@@ -503,6 +503,35 @@ def test_whole_map_search_with_keyframe_windows(taught: Taught, repeat_features,
     assert abs(kf_z + first.T_kf_cam[2, 3] - REPEAT_Z[12]) < 0.1
 
 
+def test_whole_map_search_matches_each_keyframe_once_with_the_windows_matches(taught: Taught, repeat_features):
+    """In the search every keyframe's landmarks are matched to the frame once and combined per window; the matches
+    of every window are exactly those of matching the window's landmarks at once (as outside the search)."""
+    import lightfast.vtr.repeat as repeat_module
+    from lightfast.vtr.repeat import MapLocalizer
+
+    localizer = MapLocalizer(taught.teach_map, _repeat_config("fused", search_window_radius=2))
+    features = repeat_features["changed"][12]
+    camera = StereoCamera.from_projections(P_LEFT, P_RIGHT)
+    seen, distance_calls = [], []
+    correspondences, distances = MapLocalizer.correspondences, repeat_module.descriptor_distances
+
+    def spy(self, feats, source, cam, ref, window, prior):
+        out = correspondences(self, feats, source, cam, ref, window, prior)
+        seen.append((feats, source, ref, window, out))
+        return out
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(MapLocalizer, "correspondences", spy)
+        mp.setattr(repeat_module, "descriptor_distances", lambda *a: distance_calls.append(1) or distances(*a))
+        found = localizer.search(features, camera)
+    n = len(taught.teach_map)
+    assert found.success and len(distance_calls) == n * len(localizer.sources)
+    assert len(seen) == n * len(localizer.sources) and sum(len(out[0]) for *_, out in seen) > 100
+    for feats, source, ref, window, out in seen:  # outside a search: the landmarks of the window matched at once
+        direct = localizer.correspondences(feats, source, camera, ref, window, None)
+        assert all(np.array_equal(a, b) for a, b in zip(out, direct, strict=True)), (ref, source)
+
+
 def test_repeat_step_on_images_and_mcmanus_lazy_sources(taught: Taught, scene: Scene):
     """The node-facing call (images in) in every mode; mcmanus computes F_v/F_r only when grey fails."""
     rng = np.random.default_rng(30)
