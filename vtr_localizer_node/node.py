@@ -109,6 +109,7 @@ from lightfast.vtr.map_store import MapError, MapStore, TeachMap
 from lightfast.vtr.repeat import RepeatPipeline, RepeatResult
 from lightfast.vtr.stereo import check_projection, check_stereo_pair
 from lightfast.vtr.teach import TeachPipeline, TeachResult
+from lightfast.vtr.visual_odometry import warm_up
 
 NODE_NAME = "vtr_localizer_node"
 #: Unpaired left / right images kept per side.
@@ -185,6 +186,7 @@ class VtrLocalizerNode(Node):
         self.finished: TeachMap | None = None  # the map a finished teach wrote
         self._map_error: str | None = None
         self._map_attempt: float | None = None
+        warm_up()  # the jitted RANSAC scoring: compiled (or loaded) now, not on the first stereo pair
         if cfg.mode == "teach":
             self._check_teach_target(cfg)
             self.teach = TeachPipeline(self.map_path, cfg.teach_config(), stereo=cfg.stereo_config(),

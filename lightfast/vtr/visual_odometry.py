@@ -40,6 +40,7 @@ import math
 from dataclasses import dataclass, field
 from typing import Final
 
+import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
@@ -59,6 +60,7 @@ __all__ = [
     "max_descriptor_distance",
     "project",
     "refine_pose_stereo",
+    "warm_up",
 ]
 
 log = logging.getLogger(__name__)
@@ -323,6 +325,36 @@ class _ConsistentTriples:
         return np.column_stack([ij[keep], k[keep]])
 
 
+@numba.njit(cache=True, nogil=True)
+def _count_inliers(Ts: NDArray[np.float64], P: NDArray[np.float64], meas: NDArray[np.float64], fx: float, fy: float,
+                   cx: float, cy: float, fb: float, thr2: float) -> NDArray[np.int64]:  # pragma: no cover (jitted)
+    """Per hypothesis T_cur_ref (H, 4, 4): how many reference points P (N, 3) project in front of the current camera
+    with a squared stereo reprojection error (u, v, d) against ``meas`` (N, 3) of at most ``thr2``."""
+    counts = np.zeros(Ts.shape[0], np.int64)
+    for h in range(Ts.shape[0]):
+        T = Ts[h]
+        c = 0
+        for i in range(P.shape[0]):
+            x, y, z = P[i, 0], P[i, 1], P[i, 2]
+            pz = T[2, 0] * x + T[2, 1] * y + T[2, 2] * z + T[2, 3]
+            if pz <= 1e-6:
+                continue
+            px = T[0, 0] * x + T[0, 1] * y + T[0, 2] * z + T[0, 3]
+            py = T[1, 0] * x + T[1, 1] * y + T[1, 2] * z + T[1, 3]
+            eu = fx * px / pz + cx - meas[i, 0]
+            ev = fy * py / pz + cy - meas[i, 1]
+            ed = fb / pz - meas[i, 2]
+            if eu * eu + ev * ev + ed * ed <= thr2:
+                c += 1
+        counts[h] = c
+    return counts
+
+
+def warm_up() -> None:
+    """Compile (or load from numba's cache) the jitted RANSAC scoring now rather than on the first frame."""
+    _count_inliers(np.eye(4)[None], np.ones((1, 3)), np.ones((1, 3)), 1.0, 1.0, 0.0, 0.0, 1.0, 1.0)
+
+
 def _kabsch_batch(P: NDArray[np.float64], Q: NDArray[np.float64]) -> NDArray[np.float64]:
     """Rigid transforms (H, 4, 4) with Q ≈ R P + t for batches of point triples P, Q (H, 3, 3) (rows = points)."""
     cp, cq = P.mean(axis=1, keepdims=True), Q.mean(axis=1, keepdims=True)
@@ -470,14 +502,7 @@ def estimate_pose_stereo(
         if s.shape[0] == 0:
             continue
         Ts = _kabsch_batch(Ps, Qs)  # T_cur_ref hypotheses
-        p = Pv @ Ts[:, :3, :3].transpose(0, 2, 1) + Ts[:, None, :3, 3]  # (h, n, 3); a BLAS product (einsum: 30× slower)
-        zz = p[..., 2]
-        front = zz > 1e-6
-        zs = np.where(front, zz, 1.0)
-        e = (K[0, 0] * p[..., 0] / zs + K[0, 2] - Mv[None, :, 0]) ** 2
-        e += (K[1, 1] * p[..., 1] / zs + K[1, 2] - Mv[None, :, 1]) ** 2
-        e += (fb / zs - Mv[None, :, 2]) ** 2
-        counts = np.count_nonzero(front & (e <= thr2), axis=1)
+        counts = _count_inliers(Ts, Pv, Mv, K[0, 0], K[1, 1], K[0, 2], K[1, 2], fb, thr2)
         k = int(np.argmax(counts))
         if counts[k] > best_count:
             best_count, best_T = int(counts[k]), Ts[k]
