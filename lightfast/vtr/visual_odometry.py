@@ -12,11 +12,11 @@ to the most recent view, instead of the map." Both therefore use the same steps,
    changes, the ratio test runs among spatially plausible candidates only, and far fewer descriptor distances).
 2. **Outlier rejection** (:func:`estimate_pose_stereo`): RANSAC with the 3-point 3-D–3-D minimal solver
    (Kabsch/Horn on the reference points vs the current stereo points; the scheme of the VT&R system the paper
-   builds on, Furgale & Barfoot [6]), hypotheses vectorized in NumPy and scored by the **stereo reprojection
-   error** of every correspondence: the reference point projected into the current left image (u, v) and its
-   predicted disparity d, against the measured (u, v, d); inlier when the norm of the three residuals is below
-   ``threshold_px``. The disparity term rejects matches whose depth disagrees (random matches that happen to
-   reproject), and it makes the pose along the optical axis observable.
+   builds on, Furgale & Barfoot [6]), hypotheses drawn and solved in NumPy batches, scored (jitted) by the
+   **stereo reprojection error** of every correspondence: the reference point projected into the current left
+   image (u, v) and its predicted disparity d, against the measured (u, v, d); inlier when the norm of the three
+   residuals is below ``threshold_px``. The disparity term rejects matches whose depth disagrees (random matches
+   that happen to reproject), and it makes the pose along the optical axis observable.
 3. **Nonlinear refinement**: Levenberg–Marquardt on the same stereo reprojection residuals of the inliers
    (analytic Jacobian, SE(3) left perturbation), inliers re-selected with the refined pose, refined once more.
    The 6×6 covariance σ²(JᵀJ)⁻¹ with a nominal σ = 1 px is returned; :attr:`PoseEstimate.position_std_m` (the
@@ -447,7 +447,7 @@ def estimate_pose_stereo(
     reprojection error, then Levenberg–Marquardt on the inliers (steps 2–3 of the module docstring).
 
     With ``consistent_fraction`` > 0 that share of the hypotheses is drawn from *distance-consistent* triples
-    (:func:`_consistent_triples`: a rigid motion keeps the distances between points, so the three reference points
+    (:class:`_ConsistentTriples`: a rigid motion keeps the distances between points, so the three reference points
     and the three current stereo points must have pairwise distances that agree within the stereo depth
     uncertainty of a ``consistency_px`` disparity error), the rest uniformly as before. At low inlier ratios —
     the whole-map search under changed lighting, a dozen correct matches among ~200 — a uniform triple is all
