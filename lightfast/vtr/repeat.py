@@ -64,7 +64,7 @@ from lightfast.config import Config, ConfigError, config_from_mapping, param
 from lightfast.vtr.color_constant import ColorConstantConfig
 from lightfast.vtr.errors import VtrInputError
 from lightfast.vtr.map_store import TeachMap
-from lightfast.vtr.stereo import StereoConfig, StereoFeatures, check_stereo_pair, descriptor_distances
+from lightfast.vtr.stereo import NearestMatches, StereoConfig, StereoFeatures, check_stereo_pair
 from lightfast.vtr.teach import SourceFrontEnd
 from lightfast.vtr.visual_odometry import (
     StereoCamera,
@@ -219,50 +219,6 @@ class _Submap:
     descriptors: NDArray[np.generic]
 
 
-@dataclass(frozen=True)
-class _UnguidedRows:
-    """Unguided matching of one keyframe's landmarks of one source against the current keypoints, the part of
-    :func:`~lightfast.vtr.stereo.match_descriptors` that does not depend on the window: per landmark its nearest
-    keypoint, that distance and whether it passes the ratio test and the distance limit; per keypoint the nearest
-    landmark of this keyframe (first on ties) and its distance (inf without landmarks)."""
-
-    best: NDArray[np.intp]
-    ok: NDArray[np.bool_]
-    col_min: NDArray[np.float32]
-    col_arg: NDArray[np.intp]
-
-    @classmethod
-    def match(cls, landmarks: NDArray[np.generic], current: StereoFeatures, ratio: float,
-              max_distance: float) -> _UnguidedRows:
-        n, m = len(landmarks), len(current.descriptors)
-        if n == 0 or m == 0:
-            return cls(np.zeros(n, np.intp), np.zeros(n, bool), np.full(m, np.inf, np.float32), np.zeros(m, np.intp))
-        d = descriptor_distances(landmarks, current.descriptors, current.kind)
-        best = np.argmin(d, axis=1)
-        d1 = d[np.arange(n), best]
-        ok = d1 <= max_distance
-        if m >= 2:
-            ok &= d1 < np.float32(ratio) * np.partition(d, 1, axis=1)[:, 1]
-        return cls(best, ok, d.min(axis=0), np.argmin(d, axis=0))
-
-    @staticmethod
-    def window(rows: Sequence[_UnguidedRows]) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
-        """The mutual matches of a window (its keyframes' landmarks concatenated in window order): exactly those of
-        matching the concatenated landmarks at once, since a landmark's nearest keypoint and ratio test do not
-        depend on the other landmarks, and a keypoint's nearest landmark in the window is the nearest of the
-        keyframes' nearest ones (the first keyframe on ties, as ``argmin`` over the concatenation)."""
-        best = np.concatenate([r.best for r in rows])
-        ok = np.concatenate([r.ok for r in rows])
-        if not ok.any():
-            return np.zeros(0, np.intp), np.zeros(0, np.intp)
-        offsets = np.cumsum([0] + [len(r.best) for r in rows])
-        col_min = np.stack([r.col_min for r in rows])
-        first = np.argmin(col_min, axis=0)
-        nearest_row = offsets[first] + np.stack([r.col_arg for r in rows])[first, np.arange(col_min.shape[1])]
-        keep = ok & (nearest_row[best] == np.arange(best.size))
-        return np.flatnonzero(keep), best[keep]
-
-
 class MapLocalizer:
     """Localization of the current frame against a teach map (step 4 of the module docstring)."""
 
@@ -279,7 +235,7 @@ class MapLocalizer:
         self._max_d = max_descriptor_distance(teach_map.feature, c.orb_max_distance, c.sift_max_distance)
         self._submaps: dict[tuple[int, tuple[int, ...], str], _Submap] = {}
         # during a whole-map search: per (keyframe, source) its unguided matches with the features they were made of
-        self._unguided: dict[tuple[int, str], tuple[StereoFeatures, _UnguidedRows]] | None = None
+        self._unguided: dict[tuple[int, str], tuple[StereoFeatures, NearestMatches]] | None = None
 
     @property
     def first_sources(self) -> tuple[str, ...]:
@@ -314,7 +270,7 @@ class MapLocalizer:
         sub = self.submap(ref, window, source)
         guided = T_ref_cam_prior is not None and c.match_radius_px > 0
         if not guided and self._unguided is not None and c.mutual:
-            i_ref, i_cur = _UnguidedRows.window([self._unguided_rows(j, source, features) for j in window])
+            i_ref, i_cur = NearestMatches.mutual([self._unguided_rows(j, source, features) for j in window])
             return sub.points[i_ref], features.uv_left[i_cur], camera.effective_disparity(features)[i_cur]
         i_ref, i_cur, _ = match_landmarks(
             sub.points, sub.descriptors, features.uv_left, features.descriptors, features.kind, K=camera.K,
@@ -323,12 +279,13 @@ class MapLocalizer:
         )
         return sub.points[i_ref], features.uv_left[i_cur], camera.effective_disparity(features)[i_cur]
 
-    def _unguided_rows(self, keyframe: int, source: str, features: StereoFeatures) -> _UnguidedRows:
+    def _unguided_rows(self, keyframe: int, source: str, features: StereoFeatures) -> NearestMatches:
+        """The unguided matches of one keyframe's landmarks of ``source``, computed once per search frame."""
         assert self._unguided is not None
         cached = self._unguided.get((keyframe, source))
         if cached is None or cached[0] is not features:
-            rows = _UnguidedRows.match(self.map.keyframes[keyframe].landmarks[source].descriptors, features,
-                                       self.config.ratio, self._max_d)
+            rows = NearestMatches.of(self.map.keyframes[keyframe].landmarks[source].descriptors, features.descriptors,
+                                     features.kind, ratio=self.config.ratio, max_distance=self._max_d)
             cached = self._unguided[(keyframe, source)] = (features, rows)
         return cached[1]
 
@@ -412,7 +369,7 @@ class MapLocalizer:
         unguided; the most inliers win (first on ties)."""
         best: Localization | None = None
         r, n = self.config.search_window_radius, len(self.map)
-        # every keyframe is in up to 2r + 1 windows: match its landmarks once (_UnguidedRows), combine per window
+        # every keyframe is in up to 2r + 1 windows: match its landmarks once (NearestMatches), combine per window
         self._unguided = {}
         try:
             for k in range(n):

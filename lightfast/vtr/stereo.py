@@ -57,6 +57,7 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Final
 
@@ -73,6 +74,7 @@ __all__ = [
     "FEATURE_TYPES",
     "FeatureExtractor",
     "Features",
+    "NearestMatches",
     "StereoConfig",
     "StereoFeatures",
     "StereoFrontEnd",
@@ -332,6 +334,53 @@ def _select_matches(
     return i[keep], j[keep], d1[keep]
 
 
+@dataclass(frozen=True)
+class NearestMatches:
+    """All-pairs (unguided) nearest neighbours from descriptor set ``a`` (N, D) to ``b`` (M, D): per row of ``a`` its
+    nearest ``b`` (``best``), that distance (``d1``) and whether it passes the ratio test and the distance limit
+    (``ok``); per ``b`` its nearest row of ``a`` (``col_arg``, first on ties) and that distance (``col_min``, inf
+    without rows). The mutual check needs the rows of every set matched together, which :meth:`mutual` computes
+    from the parts: a row's nearest ``b`` and ratio test do not depend on the other rows."""
+
+    best: NDArray[np.intp]
+    d1: NDArray[np.float32]
+    ok: NDArray[np.bool_]
+    col_min: NDArray[np.float32]
+    col_arg: NDArray[np.intp]
+
+    @classmethod
+    def of(cls, a: NDArray[np.generic], b: NDArray[np.generic], kind: str, *, ratio: float,
+           max_distance: float) -> NearestMatches:
+        n, m = len(a), len(b)
+        if n == 0 or m == 0:
+            return cls(np.zeros(n, np.intp), np.full(n, np.inf, np.float32), np.zeros(n, bool),
+                       np.full(m, np.inf, np.float32), np.zeros(m, np.intp))
+        d = descriptor_distances(a, b, kind)
+        best = np.argmin(d, axis=1)
+        d1 = d[np.arange(n), best]
+        ok = d1 <= max_distance
+        if m >= 2:
+            ok &= d1 < np.float32(ratio) * np.partition(d, 1, axis=1)[:, 1]
+        col_arg = np.argmin(d, axis=0)
+        return cls(best, d1, ok, d[col_arg, np.arange(m)], col_arg)
+
+    @staticmethod
+    def mutual(parts: Sequence[NearestMatches]) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+        """Mutual matches ``(rows, b indices)`` of the parts' rows concatenated in order (all against the same
+        ``b``): exactly those of matching the concatenation at once — a ``b``'s nearest row is the nearest of the
+        parts' nearest ones, the first part on ties as ``argmin`` over the concatenation."""
+        best = np.concatenate([p.best for p in parts])
+        ok = np.concatenate([p.ok for p in parts])
+        if not ok.any():
+            return np.zeros(0, np.intp), np.zeros(0, np.intp)
+        offsets = np.cumsum([0] + [len(p.best) for p in parts])
+        col_min = np.stack([p.col_min for p in parts])
+        first = np.argmin(col_min, axis=0)
+        nearest_row = offsets[first] + np.stack([p.col_arg for p in parts])[first, np.arange(col_min.shape[1])]
+        keep = ok & (nearest_row[best] == np.arange(best.size))
+        return np.flatnonzero(keep), best[keep]
+
+
 def match_descriptors(
     a: NDArray[np.generic],
     b: NDArray[np.generic],
@@ -361,17 +410,12 @@ def match_descriptors(
     if a.ndim != 2 or b.ndim != 2 or a.shape[1] != b.shape[1]:
         raise VtrInputError(f"descriptor shapes {a.shape} and {b.shape} do not match")
     if candidates is None:
-        d = descriptor_distances(a, b, kind)
-        rows = np.arange(n)
-        best = np.argmin(d, axis=1)
-        d1 = d[rows, best]
-        keep = np.ones(n, bool)
-        if m >= 2:
-            keep &= d1 < np.float32(ratio) * np.partition(d, 1, axis=1)[:, 1]
+        nearest = NearestMatches.of(a, b, kind, ratio=ratio, max_distance=max_distance)
         if mutual:
-            keep &= np.argmin(d, axis=0)[best] == rows
-        keep &= d1 <= max_distance
-        return rows[keep], best[keep], d1[keep]
+            i, j = NearestMatches.mutual([nearest])
+            return i, j, nearest.d1[i]
+        i = np.flatnonzero(nearest.ok)
+        return i, nearest.best[i], nearest.d1[i]
     ia, ib = (np.asarray(c, dtype=np.intp) for c in candidates)
     if ia.shape != ib.shape or ia.ndim != 1:
         raise VtrInputError("candidates must be two index arrays of the same length")

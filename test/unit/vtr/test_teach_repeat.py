@@ -506,14 +506,14 @@ def test_whole_map_search_with_keyframe_windows(taught: Taught, repeat_features,
 def test_whole_map_search_matches_each_keyframe_once_with_the_windows_matches(taught: Taught, repeat_features):
     """In the search every keyframe's landmarks are matched to the frame once and combined per window; the matches
     of every window are exactly those of matching the window's landmarks at once (as outside the search)."""
-    import lightfast.vtr.repeat as repeat_module
+    import lightfast.vtr.stereo as stereo_module
     from lightfast.vtr.repeat import MapLocalizer
 
     localizer = MapLocalizer(taught.teach_map, _repeat_config("fused", search_window_radius=2))
     features = repeat_features["changed"][12]
     camera = StereoCamera.from_projections(P_LEFT, P_RIGHT)
     seen, distance_calls = [], []
-    correspondences, distances = MapLocalizer.correspondences, repeat_module.descriptor_distances
+    correspondences, distances = MapLocalizer.correspondences, stereo_module.descriptor_distances
 
     def spy(self, feats, source, cam, ref, window, prior):
         out = correspondences(self, feats, source, cam, ref, window, prior)
@@ -522,7 +522,7 @@ def test_whole_map_search_matches_each_keyframe_once_with_the_windows_matches(ta
 
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(MapLocalizer, "correspondences", spy)
-        mp.setattr(repeat_module, "descriptor_distances", lambda *a: distance_calls.append(1) or distances(*a))
+        mp.setattr(stereo_module, "descriptor_distances", lambda *a: distance_calls.append(1) or distances(*a))
         found = localizer.search(features, camera)
     n = len(taught.teach_map)
     assert found.success and len(distance_calls) == n * len(localizer.sources)
