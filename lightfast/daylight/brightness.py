@@ -61,6 +61,7 @@ __all__ = [
     "fit_scales",
     "radiosity_images",
     "relit_image",
+    "warm_up",
 ]
 
 #: The illumination components of §III-A, in the order of :attr:`ScaleFit.scales` rows.
@@ -351,6 +352,14 @@ def _fit_channel_crf(A: F64, y: F64, table: F64, slopes: F64, x0: F64, bounded: 
         if not improved or rel < tolerance or moved <= 1e-5 * (1.0 + np.sqrt(np.sum(s ** 2))):
             break
     return np.maximum(s, 0.0)
+
+
+def warm_up(crf: CameraResponse) -> None:
+    """Compile (or load from numba's cache) the jitted E_crf fit now: on a fresh checkout compiling it took ~30 s
+    of the first live frame."""
+    table, slopes = crf.channel_table(0)
+    _fit_channel_crf(np.ones((3, 3)), np.full(3, 100.0), table, slopes, np.ones(3), True, 2, 1e-7)
+    _crf_residuals(np.ones((3, 3)), np.full(3, 100.0), table, slopes, np.ones(3))
 
 
 def fit_scales(

@@ -37,11 +37,10 @@ from lightfast.daylight.brightness import (
     BrightnessError,
     BrightnessEstimator,
     RadiosityImages,
-    _crf_residuals,
-    _fit_channel_crf,
     _grid_rays,
     _pose,
 )
+from lightfast.daylight.brightness import warm_up as warm_up_brightness
 from lightfast.daylight.crf import CameraResponse
 from lightfast.daylight.lighting_map import LightingMap
 
@@ -199,9 +198,7 @@ class DaylightRelighter:
         x = _shade(miss, uv, self._faces, self._stack, np.eye(self._stack.shape[1], 3, dtype=np.float32))
         _shade(miss, uv, self._faces, self._reflectance, np.eye(3, dtype=np.float32))
         _apply_response(x, *self._response)
-        table, slopes = self.crf.channel_table(0)  # the E_crf fit (compiling it took ~30 s of the first live frame)
-        _fit_channel_crf(np.ones((3, 3)), np.full(3, 100.0), table, slopes, np.ones(3), True, 2, 1e-7)
-        _crf_residuals(np.ones((3, 3)), np.full(3, 100.0), table, slopes, np.ones(3))
+        warm_up_brightness(self.crf)
 
     def _make_estimator(self) -> BrightnessEstimator:
         cfg = self.config
