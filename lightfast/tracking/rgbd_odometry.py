@@ -138,10 +138,8 @@ class TrackingConfig(Config):
         0, description="Pyramid level where the alignment stops: 0 = full resolution, 1 = half, ...", min=0, max=5
     )
     finest_point_step: int = param(
-        2, description="Source points at the level where an alignment stops (its finest level: full resolution, or "
-        "level 1 for the tracker's f2f and for f2m against a half-resolution reference): every pixel (1), a "
-        "checkerboard (2) or every second row and column (4); coarser levels and the target keep every pixel.",
-        choices=(1, 2, 4)
+        2, description="Source points at the finest level: every pixel (1), a checkerboard (2) or every second row "
+        "and column (4); the reference keeps every pixel.", choices=(1, 2, 4)
     )
     min_inlier_ratio: float = param(
         0.2, description="Below this inlier ratio the result is flagged as not converged.", min=0.0, max=1.0
@@ -210,12 +208,14 @@ class _Level:
     Python 3.11 it computes under one lock per class, which made the f2f and f2m threads of the tracker node wait
     for each other; two threads computing the same map at once both get a correct one.)"""
 
-    def __init__(self, camera: PinholeCamera, grey: NDArray[np.float32], depth: NDArray[np.float32]) -> None:
+    def __init__(self, camera: PinholeCamera, grey: NDArray[np.float32], depth: NDArray[np.float32],
+                 point_step: int) -> None:
         self.camera = camera
         self.grey = grey  # (H, W)
         self.depth = depth  # (H, W), 0 = invalid
+        self._point_step = point_step
         self._geometry: NDArray[np.float32] | None = None
-        self._sources: dict[int, tuple[NDArray[np.float32], NDArray[np.float32]]] = {}
+        self._source: tuple[NDArray[np.float32], NDArray[np.float32]] | None = None
         self._grey_grad: NDArray[np.float32] | None = None
 
     @property
@@ -226,13 +226,20 @@ class _Level:
             self._geometry = _geometry_map(self.depth, cam.fx, cam.fy, cam.cx, cam.cy)
         return self._geometry
 
-    def source(self, step: int = 1) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
-        """The source role: (N, 3) vertices and (N,) grey values of the pixels with depth, every pixel (``step``
-        1), a checkerboard (2) or every second row and column (4)."""
-        src = self._sources.get(step)
-        if src is None:
-            src = self._sources[step] = _source_points(self.geometry, self.grey, step)
-        return src
+    def _source_arrays(self) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
+        if self._source is None:
+            self._source = _source_points(self.geometry, self.grey, self._point_step)
+        return self._source
+
+    @property
+    def points(self) -> NDArray[np.float32]:
+        """(N, 3) vertices of the source pixels with depth."""
+        return self._source_arrays()[0]
+
+    @property
+    def point_grey(self) -> NDArray[np.float32]:
+        """(N,) grey values of the source points."""
+        return self._source_arrays()[1]
 
     @property
     def grey_grad(self) -> NDArray[np.float32]:
@@ -366,7 +373,7 @@ def _prepare(rgb: ArrayLike, depth_m: ArrayLike, camera: PinholeCamera, cfg: Tra
             raise TrackingError(
                 f"image too small for {cfg.pyramid_levels} pyramid levels: level {level} is {grey.shape}"
             )
-        levels.append(_Level(cam, grey, depth))
+        levels.append(_Level(cam, grey, depth, cfg.finest_point_step if level == 0 else 1))
     return RGBDFrame(tuple(levels), camera, cfg.pyramid_levels, cfg.resolution_scale)
 
 
@@ -537,14 +544,12 @@ _TRIU = np.triu_indices(6)
 
 
 def _linearize(
-    src: _Level, tgt: _Level, T: NDArray[np.float64], cfg: TrackingConfig, use_color: bool, use_depth: bool,
-    point_step: int = 1,
+    src: _Level, tgt: _Level, T: NDArray[np.float64], cfg: TrackingConfig, use_color: bool, use_depth: bool
 ) -> _Terms:
     cam = tgt.camera
     intrinsics = np.array([cam.fx, cam.fy, cam.cx, cam.cy], dtype=np.float64)
-    points, grey = src.source(point_step)
     out, count, inliers, cost = _accumulate(
-        points, grey, np.ascontiguousarray(T, dtype=np.float64), intrinsics, tgt.grey_grad,
+        src.points, src.point_grey, np.ascontiguousarray(T, dtype=np.float64), intrinsics, tgt.grey_grad,
         tgt.geometry, use_color, use_depth, cfg.depth_outlier_trunc_m, cfg.intensity_huber_delta,
         cfg.geometric_huber_delta_m, cfg.geometric_weight,
     )
@@ -574,9 +579,8 @@ def _align_pyramids(
     for level in reversed(range(finest, cfg.pyramid_levels)):
         n_iter = cfg.iterations[cfg.pyramid_levels - 1 - level]
         level_converged = False
-        step = cfg.finest_point_step if level == finest else 1
         for _ in range(n_iter):
-            terms = _linearize(src[level], tgt[level], T, cfg, use_color, use_depth, step)
+            terms = _linearize(src[level], tgt[level], T, cfg, use_color, use_depth)
             if terms.count < _MIN_CORRESPONDENCES:
                 break
             H, b = terms.H, terms.b
@@ -599,9 +603,8 @@ def _align_pyramids(
             # iteration budget used up: accept if the last step was small relative to the motion scale
             level_converged = terms.count >= _MIN_CORRESPONDENCES and float(np.linalg.norm(xi)) < 1e-3
     # statistics of the last linearisation at the finest level (before its final, small step)
-    step = cfg.finest_point_step
-    final = terms if total_iterations else _linearize(src[finest], tgt[finest], T, cfg, use_color, use_depth, step)
-    n_valid = max(len(src[finest].source(step)[0]), 1)
+    final = terms if total_iterations else _linearize(src[finest], tgt[finest], T, cfg, use_color, use_depth)
+    n_valid = max(len(src[finest].points), 1)
     inlier_ratio = final.inliers / n_valid
     converged = level_converged and final.count >= _MIN_CORRESPONDENCES and inlier_ratio >= cfg.min_inlier_ratio
     residual = final.cost if final.count else math.inf

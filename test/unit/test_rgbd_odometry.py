@@ -180,8 +180,7 @@ def _reference_terms(src, tgt, T, cfg, use_color, use_depth):
     """Eq. 7 normal equations written out with NumPy (independent of the fused kernel): nearest-pixel
     association with the occlusion test, bilinear intensity/gradient, point-to-plane, Huber IRLS weights."""
     cam = tgt.camera
-    points, point_grey = src.source()
-    q = points.astype(np.float64) @ T[:3, :3].T + T[:3, 3]
+    q = src.points.astype(np.float64) @ T[:3, :3].T + T[:3, 3]
     z = q[:, 2]
     u = cam.fx * q[:, 0] / z + cam.cx
     v = cam.fy * q[:, 1] / z + cam.cy
@@ -206,7 +205,7 @@ def _reference_terms(src, tgt, T, cfg, use_color, use_depth):
         g = tgt.grey_grad.astype(np.float64)
         s = (1 - a) * (1 - c) * g[v0, u0] + a * (1 - c) * g[v0, u0 + 1] + (1 - a) * c * g[v0 + 1, u0] \
             + a * c * g[v0 + 1, u0 + 1]
-        r = s[:, 0] - point_grey[idx]
+        r = s[:, 0] - src.point_grey[idx]
         grad = np.stack([s[:, 1] * cam.fx / q[:, 2], s[:, 2] * cam.fy / q[:, 2], np.zeros(len(q))], axis=1)
         grad[:, 2] = -(grad[:, 0] * q[:, 0] + grad[:, 1] * q[:, 1]) / q[:, 2]
         add(np.concatenate([grad, np.cross(q, grad)], axis=1), r, cfg.intensity_huber_delta, 1.0)
