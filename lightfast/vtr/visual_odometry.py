@@ -325,6 +325,40 @@ class _ConsistentTriples:
         return np.column_stack([ij[keep], k[keep]])
 
 
+class _ProsacTriples:
+    """PROSAC's progressive sampling (Chum & Matas, CVPR 2005, §2.2) of index triples: correspondences ordered by
+    ``quality`` (lower is better, e.g. the descriptor distance); hypothesis ``t`` draws the ``n``-th best and two
+    of the ``n − 1`` better ones, ``n`` growing from 3 by the paper's schedule ``T_n = T_N · C(n, 3) / C(N, 3)``
+    (``T'_{n+1} = T'_n + ⌈T_{n+1} − T_n⌉``, ``T_N`` = 200 000 as in the paper), so the first hypotheses come from the
+    most distinctive matches. Unlike the paper, a set size gets at most as many hypotheses as it has distinct
+    triples with its newest match, C(n − 1, 2): with few matches the schedule would otherwise draw the same few
+    triples hundreds of times. The hypothesis count continues across :meth:`sample` calls."""
+
+    T_N: Final = 200_000
+
+    def __init__(self, quality: NDArray[np.float64]) -> None:
+        self.order = np.argsort(quality, kind="stable")
+        N = len(self.order)
+        n = np.arange(3, N + 1, dtype=np.float64)
+        T_n = self.T_N * np.exp(_log_comb3(n) - _log_comb3(np.float64(N)))  # T_n for n = 3..N
+        steps = np.minimum(np.ceil(np.diff(T_n, prepend=T_n[0])), (n - 1.0) * (n - 2.0) / 2.0)
+        steps[0] = 1.0
+        self.T_prime = np.cumsum(steps)  # T'_n: the hypothesis after which n grows to n + 1
+        self.drawn = 0
+
+    def sample(self, h: int, rng: np.random.Generator) -> NDArray[np.intp]:
+        t = self.drawn + 1 + np.arange(h)
+        self.drawn += h
+        n = 3 + np.minimum(np.searchsorted(self.T_prime, t, side="left"), len(self.T_prime) - 1)  # current set size
+        others = (rng.random((h, 2)) * (n - 1)[:, None]).astype(np.intp)  # two of the n - 1 better ones
+        return self.order[np.column_stack([n - 1, others])]
+
+
+def _log_comb3(n: NDArray[np.float64] | np.float64) -> NDArray[np.float64]:
+    """log C(n, 3)."""
+    return np.log(n) + np.log(n - 1.0) + np.log(n - 2.0) - math.log(6.0)
+
+
 @numba.njit(cache=True, nogil=True)
 def _count_inliers(Ts: NDArray[np.float64], P: NDArray[np.float64], meas: NDArray[np.float64], fx: float, fy: float,
                    cx: float, cy: float, fb: float, thr2: float) -> NDArray[np.int64]:  # pragma: no cover (jitted)
@@ -441,6 +475,8 @@ def estimate_pose_stereo(
     seed: int = 0,
     consistent_fraction: float = 0.0,
     consistency_px: float = 0.35,
+    quality: ArrayLike | None = None,
+    ordered_fraction: float = 0.0,
 ) -> PoseEstimate:
     """Pose of the current camera in the reference frame from 3-D reference points and their current stereo
     measurements (left pixel, effective disparity = fb / Z): 3-point 3-D–3-D RANSAC scored by the stereo
@@ -454,6 +490,11 @@ def estimate_pose_stereo(
     inliers with probability w³ (1000 hypotheses find 12 of 164 a third of the time); about a quarter of all pairs
     but nearly every inlier pair pass the test, which makes an all-inlier triple tens of times likelier. Scoring
     and the adaptive stop (on w³, conservative) are unchanged.
+
+    With ``quality`` (per correspondence, lower is better: the descriptor distance) and ``ordered_fraction`` > 0,
+    that share of the hypotheses follows PROSAC's progressive sampling (:class:`_ProsacTriples`): the first ones
+    come from the most distinctive matches, where the correct ones concentrate when most matches are wrong (in the
+    whole-map search of a repeat at 20:06, 6 of the 20 closest of 164 matches were among its 12 correct ones).
 
     ``success`` needs at least ``max(min_inliers, 3)`` inliers. A failed estimate has ``T_ref_cur`` = identity
     and an empty inlier mask. Deterministic for a given ``seed``. Never raises for degenerate data (too few
@@ -480,6 +521,12 @@ def estimate_pose_stereo(
     m = idx.size
     rng = np.random.default_rng(seed)
     consistent = _ConsistentTriples(Pv, Q, fb, consistency_px) if consistent_fraction > 0 else None
+    ordered = None
+    if quality is not None and ordered_fraction > 0:
+        q = np.asarray(quality, np.float64).reshape(-1)
+        if q.shape[0] != n:
+            raise VtrInputError(f"{n} correspondences but {q.shape[0]} quality values")
+        ordered = _ProsacTriples(q[idx])
     thr2 = threshold_px * threshold_px
     best_count, best_T = 0, None
     needed = float(iterations)
@@ -488,10 +535,14 @@ def estimate_pose_stereo(
     while done < min(needed, iterations):
         h = min(_BATCH, iterations - done)
         done += h
-        n_cons = round(h * consistent_fraction) if consistent is not None else 0
-        s = rng.integers(0, m, size=(h - n_cons, 3))
+        n_ord = round(h * ordered_fraction) if ordered is not None else 0
+        n_cons = min(round(h * consistent_fraction), h - n_ord) if consistent is not None else 0
+        s = rng.integers(0, m, size=(h - n_cons - n_ord, 3))
         if n_cons:
             s = np.concatenate([consistent.sample(n_cons, rng), s])
+        if n_ord:
+            assert ordered is not None
+            s = np.concatenate([ordered.sample(n_ord, rng), s])
         distinct = (s[:, 0] != s[:, 1]) & (s[:, 0] != s[:, 2]) & (s[:, 1] != s[:, 2])
         s = s[distinct]
         if s.shape[0] == 0:

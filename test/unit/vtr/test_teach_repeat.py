@@ -348,6 +348,49 @@ def test_distance_consistent_sampling_finds_a_few_inliers_among_many_matches():
     assert found[0.0] <= 6 and found[0.5] >= 16, found  # measured: 0 and 18 of 20
 
 
+
+def test_prosac_sampling_draws_the_most_distinctive_matches_first():
+    """PROSAC's schedule: hypothesis t holds the n-th best match and two better ones, n growing; with few matches
+    no set size gets more hypotheses than it has distinct triples."""
+    from lightfast.vtr.visual_odometry import _ProsacTriples
+
+    quality = np.random.default_rng(5).permutation(10).astype(float)  # match i has rank quality[i]
+    sampler = _ProsacTriples(quality)
+    triples = np.concatenate([sampler.sample(7, np.random.default_rng(1)) for _ in range(3)])
+    ranks = quality[triples]  # ranks of the drawn matches, the newest first
+    n = ranks[:, 0] + 1
+    assert ranks[0, 0] == 2 and np.all(np.diff(n) >= 0)  # the 3rd best first, then growing sets
+    assert np.all(ranks[:, 1:] < ranks[:, :1])  # the two others are better than the newest
+    assert n[9] == 5 and n[19] == 6 and n[20] == 7  # sizes 4, 5, 6 get C(3, 2), C(4, 2), C(5, 2) hypotheses
+    big = _ProsacTriples(np.arange(164.0))
+    assert big.sample(1000, np.random.default_rng(2)).max() < 40  # T_N = 200 000: 1000 hypotheses stay in the top
+
+
+def test_prosac_sampling_finds_a_few_inliers_among_many_matches():
+    """12 correct matches among 200 whose descriptor distances are lower on average (overlapping): half the
+    hypotheses by PROSAC find them nearly always, 1000 uniform ones rarely."""
+    camera = StereoCamera.from_projections(P_LEFT, P_RIGHT)
+    T_ref_cur = pose(0.1, 0.3, 1.0)
+    found = {0.0: 0, 0.5: 0}
+    for trial in range(20):
+        rng = np.random.default_rng(200 + trial)
+        n, n_in = 200, 12
+        P_ref = np.c_[rng.uniform(-3, 3, n), rng.uniform(-1.5, 1, n), rng.uniform(2, 12, n)]
+        uv, d = _stereo_measurements(P_ref, T_ref_cur, rng, 0.3)
+        out = slice(n_in, n)
+        uv[out], d[out] = uv[out][rng.permutation(n - n_in)], d[out][rng.permutation(n - n_in)]
+        distance = np.r_[rng.normal(40, 12, n_in), rng.normal(60, 12, n - n_in)]  # Hamming-like, overlapping
+        for fraction in found:
+            est = estimate_pose_stereo(P_ref, uv, d, camera, threshold_px=3.0, iterations=1000, min_inliers=6,
+                                       seed=trial, quality=distance, ordered_fraction=fraction)
+            if est.success:
+                assert np.linalg.norm(est.T_ref_cur[:3, 3] - T_ref_cur[:3, 3]) < 0.05
+                assert est.inliers[n_in:].sum() <= 2
+                found[fraction] += 1
+    assert found[0.0] <= 6 and found[0.5] >= 16, found
+    with pytest.raises(VtrInputError, match="quality"):
+        estimate_pose_stereo(P_ref, uv, d, camera, quality=distance[:-1], ordered_fraction=0.5)
+
 # --------------------------------------------------------------------------------------------------------------
 # Teach
 
