@@ -34,7 +34,9 @@ Per stereo frame (:meth:`RepeatPipeline.step`, the call a node makes per synchro
    1.1–1.5 m off with exactly six inliers and a well-constrained pose): the camera position must be constrained
    (``max_position_std_m``, from the pose covariance at a nominal 1 px noise; rejects poses resting on far points
    only), and a windowed localization must lie within ``prior_gate_m + prior_gate_per_m · (distance on VO)`` of
-   the VO prior (no gate for the whole-map search, which has no prior).
+   the VO prior (no gate for the whole-map search, which has no prior) — unless the previous frame's localization
+   was beyond the gate as well, both have ``confirm_beyond_gate_inliers`` inliers and they agree after the VO motion
+   between them: then the prior is the wrong one (a VO step gone astray).
 5. **Failure handling** (§IV-C): without success the VO prior is the pose and the distance driven on VO alone
    accumulates; beyond ``max_distance_on_vo_m`` (20 m) it is a **localization failure**: the robot "stops" and
    the **whole map is searched** (every keyframe alone, or with ``search_window_radius`` neighbours, unguided
@@ -378,7 +380,7 @@ class MapLocalizer:
                 gated = loc
         if best is None:
             if gated is not None:  # the favoured source's pose beyond the gate (for a confirmation next frame)
-                return self._complete(replace(gated, inliers_per_source=inliers, matches_per_source=matches))
+                return self._complete(replace(gated, matches_per_source=matches))
             return self._complete(Localization(np.eye(4), ref, False, inliers, matches))
         return self._complete(replace(best, matches_per_source=matches))
 
