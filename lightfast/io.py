@@ -12,6 +12,18 @@ from typing import Any
 import yaml
 
 
+def _umask() -> int:
+    """The process umask, read without changing it (``os.umask`` sets it, racing other threads)."""
+    try:
+        with open("/proc/self/status") as fh:
+            for line in fh:
+                if line.startswith("Umask:"):
+                    return int(line.split()[1], 8)
+    except OSError:
+        pass
+    return 0o022
+
+
 def write_text_atomic(path: str | os.PathLike[str], text: str) -> None:
     """Write ``text`` to ``path`` atomically (temporary file in the same directory, fsync, rename)."""
     write_bytes_atomic(path, text.encode())
@@ -24,6 +36,7 @@ def write_bytes_atomic(path: str | os.PathLike[str], data: bytes) -> None:
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
         with os.fdopen(fd, "wb") as fh:
+            os.fchmod(fh.fileno(), 0o666 & ~_umask())  # as open() would (mkstemp makes it private)
             fh.write(data)
             fh.flush()
             os.fsync(fh.fileno())
@@ -45,6 +58,7 @@ def atomic_directory(path: str | os.PathLike[str], *, overwrite: bool = False) -
         raise FileExistsError(f"{path} exists (pass overwrite to replace it)")
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".partial", dir=path.parent))
+    tmp.chmod(0o777 & ~_umask())  # as mkdir() would (mkdtemp makes it private)
     try:
         yield tmp
     except BaseException:

@@ -1,3 +1,6 @@
+import os
+import stat
+
 import pytest
 
 from lightfast.io import atomic_directory, read_versioned_yaml, write_text_atomic
@@ -9,6 +12,19 @@ def test_write_text_atomic_replaces_and_leaves_no_temp(tmp_path) -> None:
     write_text_atomic(path, "two")
     assert path.read_text() == "two"
     assert sorted(p.name for p in path.parent.iterdir()) == ["f.txt"]
+
+
+def test_atomic_outputs_get_the_usual_permissions(tmp_path) -> None:
+    """Not mkstemp's / mkdtemp's private 0600 / 0700: what open() and mkdir() make under the umask."""
+    old = os.umask(0o022)
+    try:
+        write_text_atomic(tmp_path / "f.txt", "x")
+        with atomic_directory(tmp_path / "d"):
+            pass
+    finally:
+        os.umask(old)
+    assert stat.S_IMODE((tmp_path / "f.txt").stat().st_mode) == 0o644
+    assert stat.S_IMODE((tmp_path / "d").stat().st_mode) == 0o755
 
 
 def test_atomic_directory_failure_keeps_old(tmp_path) -> None:
