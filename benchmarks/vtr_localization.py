@@ -73,6 +73,7 @@ SOURCES = ("grey", "fv", "fr")
 FEATURE_BUDGETS = {
     "default": StereoConfig(),
     "500 features, 4 levels": StereoConfig(max_features=500, orb_levels=4),
+    "4 levels": StereoConfig(orb_levels=4),
 }
 
 
@@ -261,6 +262,7 @@ def main() -> None:
         ("mcmanus", "default", 1, "changed"),
         ("fused", "500 features, 4 levels", 1, "changed"),
         ("fused", "500 features, 4 levels", 2, "changed"),
+        ("fused", "4 levels", 2, "changed"),
     ]
     runs, teach_ms = [], {}
     with tempfile.TemporaryDirectory(prefix="vtr_bench_") as tmp:

@@ -48,6 +48,8 @@ class VtrLocalizerConfig(Config):
                          read_only=True)
     max_features: int = param(1000, description="Teach: features kept per image, strongest first (a repeat uses the "
                               "map's).", min=10, max=100000, read_only=True)
+    orb_levels: int = param(8, description="Teach: ORB pyramid levels (a repeat uses the map's).", min=1, max=16,
+                            read_only=True)
     max_disparity_px: float = param(160.0, description="Teach: largest admissible stereo disparity, px (a repeat "
                                     "uses the map's).", min=1.0, max=10000.0, read_only=True)
     # repeat ---------------------------------------------------------------------------------------------------
@@ -111,7 +113,7 @@ class VtrLocalizerConfig(Config):
 
     def stereo_config(self) -> StereoConfig:
         """The front end of a teach (a repeat takes the map's, so that the features match)."""
-        return StereoConfig(feature=self.feature, max_features=self.max_features,
+        return StereoConfig(feature=self.feature, max_features=self.max_features, orb_levels=self.orb_levels,
                             max_disparity_px=self.max_disparity_px)
 
     def repeat_config(self) -> RepeatConfig:
