@@ -19,9 +19,10 @@ Per stereo frame (:meth:`RepeatPipeline.step`, the call a node makes per synchro
    mutual nearest neighbours, so a landmark seen by several keyframes matches a keypoint once); then, by mode:
 
    * ``fused`` (the paper's method, Fig. 4): the matches of **all sources are placed together** and sent to ONE
-     RANSAC (3-point, keyframe points vs current stereo points, scored by the stereo reprojection error; half of the
-     hypotheses by PROSAC from the matches ordered by descriptor distance, ``ransac_ordered_fraction``, optionally
-     part from distance-consistent triples, ``ransac_consistent_fraction``) and ONE nonlinear
+     RANSAC (3-point, keyframe points vs current stereo points, scored by the stereo reprojection error; without a
+     prior half of the hypotheses by PROSAC from the matches ordered by descriptor distance,
+     ``ransac_ordered_fraction``; optionally part from distance-consistent triples, ``ransac_consistent_fraction``)
+     and ONE nonlinear
      refinement (:func:`~lightfast.vtr.visual_odometry.estimate_pose_stereo`);
    * ``grey`` (legacy system [6], Fig. 3): greyscale matches only;
    * ``mcmanus`` ([10]: "matched features from one image source are chosen ..., favoring the greyscale matches"):
@@ -143,10 +144,11 @@ class RepeatConfig(Config):
         "but also found a wrong place 63 m off at the start of repeat07: off by default).", min=0.0, max=1.0,
     )
     ransac_ordered_fraction: float = param(
-        0.5, description="Share of RANSAC hypotheses drawn by PROSAC's progressive sampling from the matches ordered "
-        "by descriptor distance (the rest uniformly): the correct matches concentrate among the closest when most "
-        "are wrong (whole-map search of the sunset repeat10: its first frame localized in 30 of 40 seeds, 9 of 40 "
-        "with uniform sampling only).", min=0.0, max=1.0,
+        0.5, description="Unguided localizations (whole-map search, start window): share of RANSAC hypotheses drawn "
+        "by PROSAC's progressive sampling from the matches ordered by descriptor distance (the rest uniformly): the "
+        "correct matches concentrate among the closest when most are wrong (sunset repeat10's first frame localized "
+        "in 30 of 40 seeds, 9 of 40 uniformly). Not used with a prior: there it found more wrong poses (a second "
+        "simulated route, repeat07: 14 localizations > 1 m off vs 4).", min=0.0, max=1.0,
     )
     max_position_std_m: float = param(
         0.5, description="A localization also needs its camera position constrained to this standard deviation "
@@ -333,7 +335,8 @@ class MapLocalizer:
             np.concatenate(objs), np.concatenate(imgs), np.concatenate(disps), camera,
             threshold_px=c.ransac_threshold_px, iterations=c.ransac_iterations, confidence=c.ransac_confidence,
             min_inliers=c.min_inliers, consistent_fraction=c.ransac_consistent_fraction,
-            quality=np.concatenate(dists), ordered_fraction=c.ransac_ordered_fraction,
+            quality=np.concatenate(dists),
+            ordered_fraction=c.ransac_ordered_fraction if T_ref_cam_prior is None else 0.0,  # unguided only
         )
         lab = np.concatenate(labels)
         counts = np.bincount(lab[est.inliers], minlength=len(sources))
