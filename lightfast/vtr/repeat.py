@@ -562,8 +562,9 @@ class RepeatPipeline:
                         self._lost = False
                         log.info("relocalized at keyframe %d with %d inliers", loc.ref_index, loc.inliers)
 
-        strong = loc is not None and loc.gated and loc.inliers >= c.confirm_beyond_gate_inliers > 0
-        self._gated = (loc.ref_index, loc.T_ref_cam) if strong and not localized else None
+        self._gated = None
+        if loc is not None and not localized and self._strong_beyond_gate(loc):
+            self._gated = (loc.ref_index, loc.T_ref_cam)
         if localized:
             assert loc is not None
             self._distance_on_vo_m = 0.0
@@ -594,10 +595,14 @@ class RepeatPipeline:
             timing_s=timing,
         )
 
+    def _strong_beyond_gate(self, loc: Localization) -> bool:
+        """Rejected by the prior gate only, with ``confirm_beyond_gate_inliers`` (> 0) inliers."""
+        return loc.gated and loc.inliers >= self.config.confirm_beyond_gate_inliers > 0
+
     def _confirmed(self, loc: Localization, motion: NDArray[np.float64]) -> bool:
-        """Whether a localization rejected by the prior gate agrees with the previous frame's, also rejected, moved
-        by the VO ``motion`` between them, both with ``confirm_beyond_gate_inliers`` inliers."""
-        if not (loc.gated and self._gated is not None and loc.inliers >= self.config.confirm_beyond_gate_inliers):
+        """Whether a strong localization beyond the prior gate agrees with the previous frame's, also one, moved by
+        the VO ``motion`` between them."""
+        if self._gated is None or not self._strong_beyond_gate(loc):
             return False
         ref, T_ref_cam = self._gated
         expected = self.map.T_a_b(loc.ref_index, ref) @ T_ref_cam @ motion

@@ -325,6 +325,16 @@ def test_stereo_pose_solver_recovers_motion_among_outliers():
     assert not estimate_pose_stereo(P_ref[:4], uv[:4], d[:4], camera, min_inliers=6).success
 
 
+def _few_correct_matches(rng: np.random.Generator, T_ref_cur: np.ndarray, n: int, n_in: int):
+    """``n`` reference points and stereo measurements of which only the first ``n_in`` belong together; the others
+    are keypoints (with their disparities) of other landmarks, as wrong matches."""
+    P_ref = np.c_[rng.uniform(-3, 3, n), rng.uniform(-1.5, 1, n), rng.uniform(2, 12, n)]
+    uv, d = _stereo_measurements(P_ref, T_ref_cur, rng, 0.3)
+    out = slice(n_in, n)
+    uv[out], d[out] = uv[out][rng.permutation(n - n_in)], d[out][rng.permutation(n - n_in)]
+    return P_ref, uv, d
+
+
 def test_distance_consistent_sampling_finds_a_few_inliers_among_many_matches():
     """12 correct matches among 200 (the whole-map search under changed lighting): 1000 uniform hypotheses rarely
     find them; with half the hypotheses from distance-consistent triples nearly always, at the right pose."""
@@ -334,10 +344,7 @@ def test_distance_consistent_sampling_finds_a_few_inliers_among_many_matches():
     for trial in range(20):
         rng = np.random.default_rng(100 + trial)
         n, n_in = 200, 12
-        P_ref = np.c_[rng.uniform(-3, 3, n), rng.uniform(-1.5, 1, n), rng.uniform(2, 12, n)]
-        uv, d = _stereo_measurements(P_ref, T_ref_cur, rng, 0.3)
-        out = slice(n_in, n)  # wrong matches: keypoints (with their disparities) of other landmarks
-        uv[out], d[out] = uv[out][rng.permutation(n - n_in)], d[out][rng.permutation(n - n_in)]
+        P_ref, uv, d = _few_correct_matches(rng, T_ref_cur, n, n_in)
         for fraction in found:
             est = estimate_pose_stereo(P_ref, uv, d, camera, threshold_px=3.0, iterations=1000, min_inliers=6,
                                        seed=trial, consistent_fraction=fraction)
@@ -375,10 +382,7 @@ def test_prosac_sampling_finds_a_few_inliers_among_many_matches():
     for trial in range(20):
         rng = np.random.default_rng(200 + trial)
         n, n_in = 200, 12
-        P_ref = np.c_[rng.uniform(-3, 3, n), rng.uniform(-1.5, 1, n), rng.uniform(2, 12, n)]
-        uv, d = _stereo_measurements(P_ref, T_ref_cur, rng, 0.3)
-        out = slice(n_in, n)
-        uv[out], d[out] = uv[out][rng.permutation(n - n_in)], d[out][rng.permutation(n - n_in)]
+        P_ref, uv, d = _few_correct_matches(rng, T_ref_cur, n, n_in)
         distance = np.r_[rng.normal(40, 12, n_in), rng.normal(60, 12, n - n_in)]  # Hamming-like, overlapping
         for fraction in found:
             est = estimate_pose_stereo(P_ref, uv, d, camera, threshold_px=3.0, iterations=1000, min_inliers=6,
