@@ -63,6 +63,7 @@ from lightfast.vtr.stereo import (
     match_stereo,
     pair_distances,
     refine_disparity,
+    search_stereo,
     stereo_candidates,
     triangulate,
 )
@@ -138,6 +139,7 @@ __all__ = [
     "pair_distances",
     "refine_disparity",
     "refine_pose_stereo",
+    "search_stereo",
     "source_weights",
     "stereo_candidates",
     "temperature_beta",

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 from lightfast.config import Config, ConfigError, param
 from lightfast.vtr.color_constant import SOURCES
 from lightfast.vtr.repeat import MODES, RepeatConfig
-from lightfast.vtr.stereo import FEATURE_TYPES, StereoConfig
+from lightfast.vtr.stereo import FEATURE_TYPES, STEREO_MATCHING, StereoConfig
 from lightfast.vtr.teach import TeachConfig
 
 __all__ = ["PHASES", "VtrLocalizerConfig"]
@@ -52,6 +52,9 @@ class VtrLocalizerConfig(Config):
                             read_only=True)
     max_disparity_px: float = param(160.0, description="Teach: largest admissible stereo disparity, px (a repeat "
                                     "uses the map's).", min=1.0, max=10000.0, read_only=True)
+    stereo_matching: str = param("search", description="Teach: left-right matching, descriptor (features "
+                                 "detected in both images) or search (ZNCC along the row of the right image; a "
+                                 "repeat uses the map's).", choices=STEREO_MATCHING, read_only=True)
     # repeat ---------------------------------------------------------------------------------------------------
     repeat_mode: str = param("fused", description="Repeat: localization by fused sources (paper), grey (legacy) or "
                              "mcmanus (colour-constant only when grey fails).", choices=MODES, read_only=True)
@@ -114,7 +117,7 @@ class VtrLocalizerConfig(Config):
     def stereo_config(self) -> StereoConfig:
         """The front end of a teach (a repeat takes the map's, so that the features match)."""
         return StereoConfig(feature=self.feature, max_features=self.max_features, orb_levels=self.orb_levels,
-                            max_disparity_px=self.max_disparity_px)
+                            max_disparity_px=self.max_disparity_px, stereo_matching=self.stereo_matching)
 
     def repeat_config(self) -> RepeatConfig:
         return RepeatConfig(

@@ -62,6 +62,7 @@ from dataclasses import dataclass
 from typing import Final
 
 import cv2
+import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -72,6 +73,7 @@ from lightfast.vtr.errors import VtrInputError
 __all__ = [
     "FEATURE_CHOICE",
     "FEATURE_TYPES",
+    "STEREO_MATCHING",
     "FeatureExtractor",
     "Features",
     "NearestMatches",
@@ -85,6 +87,7 @@ __all__ = [
     "match_stereo",
     "pair_distances",
     "refine_disparity",
+    "search_stereo",
     "stereo_candidates",
     "triangulate",
 ]
@@ -92,6 +95,7 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 FEATURE_TYPES: Final = ("orb", "sift")
+STEREO_MATCHING: Final = ("descriptor", "search")
 
 #: Why the default feature type is ORB (numbers in the module docstring).
 FEATURE_CHOICE: Final = (
@@ -128,6 +132,21 @@ class StereoConfig(Config):
         max=1.0,
     )
     mutual: bool = param(True, description="Keep only mutually nearest admissible left-right pairs.")
+    stereo_matching: str = param(
+        "search", description="Left-right matching: 'descriptor' detects features in the right image too and "
+        "matches descriptors under the epipolar and disparity constraints; 'search' finds each left keypoint along "
+        "its row of the right image by ZNCC block matching (no right-image detection).", choices=STEREO_MATCHING,
+    )
+    search_radius_px: int = param(
+        4, description="'search': half size of the ZNCC patch, px.", min=1, max=15
+    )
+    search_min_zncc: float = param(
+        0.8, description="'search': smallest ZNCC of an accepted left-right match.", min=-1.0, max=1.0
+    )
+    search_uniqueness: float = param(
+        0.7, description="'search': (1 - best ZNCC) must be below this times (1 - best ZNCC more than 1 px away).",
+        min=0.0, max=1.0,
+    )
     orb_max_distance: float = param(
         64.0, description="ORB: largest Hamming distance of a left-right match (of 256 bits).", min=0.0
     )
@@ -247,6 +266,9 @@ class FeatureExtractor:
 # --------------------------------------------------------------------------------------------------------------
 # Matching
 
+#: Patches flatter than this grey-level standard deviation are not searched (``stereo_matching="search"``).
+_MIN_TEXTURE: Final = 2.0
+
 _POPCOUNT: Final = np.unpackbits(np.arange(256, dtype=np.uint8)[:, None], axis=1).sum(axis=1).astype(np.float32)
 
 
@@ -282,12 +304,33 @@ def pair_distances(
         if a.shape[1] % 8 == 0:
             wa = np.ascontiguousarray(a).view(np.uint64)
             wb = np.ascontiguousarray(b).view(np.uint64)
-            return np.bitwise_count(wa[ia] ^ wb[ib]).sum(axis=1, dtype=np.uint16).astype(np.float32)
+            return _hamming_pairs(wa, wb, np.asarray(ia, np.int64), np.asarray(ib, np.int64))
         return _POPCOUNT[np.bitwise_xor(a[ia], b[ib])].sum(axis=1)
     if kind == "sift":
         diff = a[ia].astype(np.float32, copy=False) - b[ib].astype(np.float32, copy=False)
         return np.sqrt(np.einsum("ij,ij->i", diff, diff)).astype(np.float32, copy=False)
     raise VtrInputError(f"unknown descriptor kind {kind!r}")
+
+
+@numba.njit(cache=True, nogil=True)
+def _hamming_pairs(wa: NDArray[np.uint64], wb: NDArray[np.uint64], ia: NDArray[np.int64], ib: NDArray[np.int64]
+                   ) -> NDArray[np.float32]:
+    """Hamming distances of the descriptor pairs (wa[ia[k]], wb[ib[k]]) (64-bit words; SWAR popcount), without
+    gathering the pairs' descriptors into temporary arrays."""
+    out = np.empty(ia.size, np.float32)
+    m1, m2, m4 = np.uint64(0x5555555555555555), np.uint64(0x3333333333333333), np.uint64(0x0F0F0F0F0F0F0F0F)
+    h01 = np.uint64(0x0101010101010101)
+    for k in range(ia.size):
+        x, y = wa[ia[k]], wb[ib[k]]
+        total = 0
+        for t in range(wa.shape[1]):
+            v = x[t] ^ y[t]
+            v = v - ((v >> np.uint64(1)) & m1)
+            v = (v & m2) + ((v >> np.uint64(2)) & m2)
+            v = (v + (v >> np.uint64(4))) & m4
+            total += int((v * h01) >> np.uint64(56))
+        out[k] = total
+    return out
 
 
 def _check_orb(a: NDArray[np.generic], b: NDArray[np.generic]) -> None:
@@ -464,6 +507,140 @@ def match_stereo(
         left.descriptors, right.descriptors, left.kind, ratio=c.ratio, mutual=c.mutual, candidates=candidates,
         max_distance=c.orb_max_distance if left.kind == "orb" else c.sift_max_distance,
     )
+
+
+@numba.njit(cache=True, nogil=True)
+def _zncc_row_search(a: NDArray[np.float32], b: NDArray[np.float32], sum_b: NDArray[np.float64],
+                     sq_b: NDArray[np.float64], us: NDArray[np.int64], vs: NDArray[np.int64], d_lo: int, d_hi: int,
+                     r: int, direction: int, min_texture: float
+                     ) -> tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.float64]]:
+    """For each pixel (us[k], vs[k]) of image ``a``: the disparity d ∈ [d_lo, d_hi] whose patch of ``b`` at column
+    us[k] + direction·d on the same rows has the highest ZNCC with the (2r+1)² patch of ``a``, that ZNCC and the
+    highest ZNCC more than 1 px away from it (−2 where there is none). Patches of ``a`` flatter than
+    ``min_texture`` (grey-level standard deviation), outside ``a``, without a candidate inside ``b``, or whose best
+    patch of ``b`` correlates better one row up or down (rows not aligned: the epipolar constraint) give d = −1.
+    ``sum_b`` / ``sq_b`` are the (H+1, W+1) integral images of ``b`` and ``b²``. The candidate columns are visited
+    in ascending order in the innermost loop (vectorized by LLVM), one patch row at a time."""
+    n = us.size
+    h, w = a.shape
+    side = 2 * r + 1
+    npx = side * side
+    best_d = np.full(n, -1, np.int64)
+    best_z = np.full(n, -2.0)
+    second_z = np.full(n, -2.0)
+    patch = np.empty((side, side), np.float32)
+    dot = np.empty(d_hi - d_lo + 1, np.float32)
+    for k in range(n):
+        u, v = us[k], vs[k]
+        if v - r < 0 or v + r >= h or u - r < 0 or u + r >= w:
+            continue
+        # admissible patch centres in b, ascending: columns c = u + direction·d with r <= c < w - r
+        if direction > 0:
+            c0, c1 = u + d_lo, u + d_hi
+        else:
+            c0, c1 = u - d_hi, u - d_lo
+        c0 = max(c0, r)
+        c1 = min(c1, w - 1 - r)
+        if c1 < c0:
+            continue
+        nc = c1 - c0 + 1
+        mean = 0.0
+        for i in range(side):
+            for j in range(side):
+                mean += a[v - r + i, u - r + j]
+        mean /= npx
+        var = 0.0
+        for i in range(side):
+            for j in range(side):
+                x = a[v - r + i, u - r + j] - mean
+                patch[i, j] = x
+                var += x * x
+        if var < min_texture * min_texture * npx:
+            continue
+        norm_a = math.sqrt(var)
+        dot[:nc] = 0.0
+        for i in range(side):
+            row = b[v - r + i]
+            for j in range(side):
+                p = patch[i, j]
+                seg = row[c0 - r + j:c0 - r + j + nc]  # a slice: its index q >= 0 needs no wraparound check
+                for q in range(nc):
+                    dot[q] += p * seg[q]
+        y0, y1 = v - r, v + r + 1
+        best, arg = -2.0, -1
+        for q in range(nc):
+            x0, x1 = c0 + q - r, c0 + q + r + 1
+            s1 = sum_b[y1, x1] - sum_b[y0, x1] - sum_b[y1, x0] + sum_b[y0, x0]
+            s2 = sq_b[y1, x1] - sq_b[y0, x1] - sq_b[y1, x0] + sq_b[y0, x0]
+            var_b = s2 - s1 * s1 / npx
+            z = dot[q] / (norm_a * math.sqrt(var_b)) if var_b > 1e-6 else -2.0
+            dot[q] = z
+            if z > best:
+                best, arg = z, q
+        if arg < 0:
+            continue
+        second = -2.0
+        for q in range(nc):
+            if abs(q - arg) > 1 and dot[q] > second:
+                second = dot[q]
+        c = c0 + arg
+        # epipolar check: the match must not correlate better one row up or down (misaligned rows)
+        row_peak = True
+        for dv in (-1, 1):
+            y0 = v - r + dv
+            if y0 < 0 or y0 + side > h:
+                continue
+            s1 = sum_b[y0 + side, c + r + 1] - sum_b[y0, c + r + 1] - sum_b[y0 + side, c - r] + sum_b[y0, c - r]
+            s2 = sq_b[y0 + side, c + r + 1] - sq_b[y0, c + r + 1] - sq_b[y0 + side, c - r] + sq_b[y0, c - r]
+            var_b = s2 - s1 * s1 / npx
+            if var_b <= 1e-6:
+                continue
+            acc = 0.0
+            for i in range(side):
+                for j in range(side):
+                    acc += patch[i, j] * b[y0 + i, c - r + j]
+            if acc / (norm_a * math.sqrt(var_b)) > best:
+                row_peak = False
+        if not row_peak:
+            continue
+        best_d[k] = (c - u) * direction
+        best_z[k] = best
+        second_z[k] = second
+    return best_d, best_z, second_z
+
+
+def search_stereo(
+    left: NDArray[np.uint8], right: NDArray[np.uint8], uv_left: NDArray[np.float32],
+    config: StereoConfig | None = None,
+) -> tuple[NDArray[np.intp], NDArray[np.float32], NDArray[np.float32]]:
+    """Left–right matches of left keypoints by ZNCC block matching along their rows of the right image (rectified
+    pair; ``stereo_matching="search"``): for each keypoint (rounded to a pixel) the integer disparity in
+    [max(``min_disparity_px``, 0), ``max_disparity_px``] with the highest ZNCC of the (2·``search_radius_px``+1)²
+    patches, kept when that ZNCC is at least ``search_min_zncc``, higher than at the same column one row up and
+    down (epipolar), unique (1 − best < ``search_uniqueness`` · (1 − best more than 1 px away)) and left–right
+    consistent (searching the right patch back along the left row lands within 1 px of the keypoint). Returns the
+    indices of the matched keypoints, their integer disparities and 1 − ZNCC (the match's distance);
+    :func:`refine_disparity` makes them sub-pixel."""
+    c = config or StereoConfig()
+    if left.shape != right.shape or left.ndim != 2:
+        raise VtrInputError(f"search_stereo needs two (H, W) images of one size, got {left.shape} and {right.shape}")
+    n = uv_left.shape[0]
+    d_lo, d_hi = max(math.ceil(c.min_disparity_px), 0), math.floor(c.max_disparity_px)
+    if n == 0 or d_hi < d_lo:
+        return np.zeros(0, np.intp), np.zeros(0, np.float32), np.zeros(0, np.float32)
+    r = c.search_radius_px
+    a, b = left.astype(np.float32), right.astype(np.float32)
+    us = np.rint(uv_left[:, 0]).astype(np.int64)
+    vs = np.rint(uv_left[:, 1]).astype(np.int64)
+    sum_r, sq_r = cv2.integral2(right, sdepth=cv2.CV_64F, sqdepth=cv2.CV_64F)
+    d, z, second = _zncc_row_search(a, b, sum_r, sq_r, us, vs, d_lo, d_hi, r, -1, _MIN_TEXTURE)
+    ok = (d >= 0) & (z >= c.search_min_zncc) & (1.0 - z < c.search_uniqueness * (1.0 - second))
+    idx = np.flatnonzero(ok)
+    if idx.size:  # left-right consistency: the right patch searched back along the left row
+        sum_l, sq_l = cv2.integral2(left, sdepth=cv2.CV_64F, sqdepth=cv2.CV_64F)
+        back, _, _ = _zncc_row_search(b, a, sum_l, sq_l, us[idx] - d[idx], vs[idx], d_lo, d_hi, r, 1, _MIN_TEXTURE)
+        idx = idx[(back >= 0) & (np.abs(back - d[idx]) <= 1)]
+    return idx.astype(np.intp), d[idx].astype(np.float32), (1.0 - z[idx]).astype(np.float32)
 
 
 def _lerp_columns(strip: NDArray[np.float32], idx: NDArray[np.intp], f: NDArray[np.float32]) -> NDArray[np.float32]:
@@ -648,24 +825,44 @@ class StereoFrontEnd:
             raise VtrInputError(f"left image {left.image.shape} and right image {right.image.shape} differ in size")
         Pl, Pr = check_stereo_pair(P_left, P_right)
         fl = self.extractor.detect(left.image, left.valid)
-        fr = self.extractor.detect(right.image, right.valid)
+        fr = self.extractor.detect(right.image, right.valid) if self.detects_right else None
         return self.landmarks(left, right, fl, fr, Pl, Pr)
 
-    def landmarks(self, left: SourceImage, right: SourceImage, fl: Features, fr: Features, P_left: ArrayLike,
-                  P_right: ArrayLike) -> StereoFeatures:
-        """:meth:`source_features` after the detection: match the left and right features ``fl``, ``fr`` of one
-        image source, refine and triangulate."""
+    @property
+    def detects_right(self) -> bool:
+        """Whether the left–right matching needs features of the right image (not with ``"search"``)."""
+        return self.config.stereo_matching == "descriptor"
+
+    def landmarks(self, left: SourceImage, right: SourceImage, fl: Features, fr: Features | None,
+                  P_left: ArrayLike, P_right: ArrayLike) -> StereoFeatures:
+        """:meth:`source_features` after the detection: match the left features ``fl`` of one image source to the
+        right features ``fr`` (``"descriptor"``) or search them in the right image (``"search"``, ``fr`` unused),
+        refine and triangulate."""
         c = self.config
         if left.image.shape != right.image.shape:
             raise VtrInputError(f"left image {left.image.shape} and right image {right.image.shape} differ in size")
         Pl, Pr = check_stereo_pair(P_left, P_right)
-        il, ir, dist = match_stereo(fl, fr, c)
-        uvl, uvr = fl.uv[il], fr.uv[ir]
-        disp = (uvl[:, 0] - uvr[:, 0]).astype(np.float32)
+        if self.detects_right:
+            if fr is None:
+                raise VtrInputError("descriptor left-right matching needs the right image's features")
+            il, ir, dist = match_stereo(fl, fr, c)
+            uvl, uvr = fl.uv[il], fr.uv[ir]
+            disp = (uvl[:, 0] - uvr[:, 0]).astype(np.float32)
+        else:
+            il, disp, dist = search_stereo(left.image, right.image, fl.uv, c)
+            uvl = fl.uv[il]
+            if right.valid is not None and len(il):  # the right pixel must be valid, as a right detection's is
+                v = np.rint(uvl[:, 1]).astype(np.intp)
+                u = np.rint(uvl[:, 0] - disp).astype(np.intp)
+                keep = right.valid[v, u]
+                il, disp, dist, uvl = il[keep], disp[keep], dist[keep], uvl[keep]
+            uvr = np.stack([uvl[:, 0] - disp, uvl[:, 1]], axis=1).astype(np.float32)
         if c.subpixel and len(il):
-            disp, refined = refine_disparity(
-                left.image, right.image, uvl, disp, radius=c.subpixel_radius_px, search=c.subpixel_search_px
-            )
+            # the row search's integer disparity is already the best one: refine around it only (the descriptor
+            # matches of coarse ORB levels can be a few pixels off)
+            search = c.subpixel_search_px if self.detects_right else min(c.subpixel_search_px, 2)
+            disp, refined = refine_disparity(left.image, right.image, uvl, disp, radius=c.subpixel_radius_px,
+                                             search=search)
             uvr = np.stack([uvl[:, 0] - disp, uvr[:, 1]], axis=1).astype(np.float32)
         else:
             refined = np.ones(len(il), bool)
@@ -675,8 +872,7 @@ class StereoFrontEnd:
                 np.all(np.isfinite(pts), axis=1) & (pts[:, 2] >= c.min_depth_m) & (pts[:, 2] <= c.max_depth_m)
                 & (disp >= c.min_disparity_px) & (disp <= c.max_disparity_px) & refined
             )
-        log.debug("%s: %d/%d left/right features, %d matches, %d landmarks", left.name, len(fl), len(fr), len(il),
-                  int(ok.sum()))
+        log.debug("%s: %d left features, %d matches, %d landmarks", left.name, len(fl), len(il), int(ok.sum()))
         return StereoFeatures(
             source=left.name,
             uv_left=uvl[ok],

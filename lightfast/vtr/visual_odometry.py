@@ -43,7 +43,6 @@ from typing import Final
 import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.spatial import cKDTree
 
 from lightfast.config import Config, param
 from lightfast.vtr.errors import VtrInputError
@@ -409,6 +408,58 @@ def _kabsch_batch(P: NDArray[np.float64], Q: NDArray[np.float64]) -> NDArray[np.
 # Matching and pose
 
 
+@numba.njit(cache=True, nogil=True)
+def _grid_pairs(a: NDArray[np.float64], b: NDArray[np.float64], radius: float, count_only: bool,
+                out_a: NDArray[np.int64], out_b: NDArray[np.int64]) -> int:
+    """Pairs (i, j) with |a[i] − b[j]| ≤ radius: ``b`` bucketed in square cells of side ``radius``, each ``a``
+    checked against the 3×3 cells around it. Counts them (``count_only``) or writes them to ``out_a``, ``out_b``."""
+    x0, y0 = b[:, 0].min(), b[:, 1].min()
+    nx = int((b[:, 0].max() - x0) / radius) + 1
+    ny = int((b[:, 1].max() - y0) / radius) + 1
+    cell = np.empty(b.shape[0], np.int64)
+    for j in range(b.shape[0]):
+        cell[j] = int((b[j, 1] - y0) / radius) * nx + int((b[j, 0] - x0) / radius)
+    order = np.argsort(cell, kind="mergesort")
+    start = np.zeros(nx * ny + 1, np.int64)
+    for j in range(b.shape[0]):
+        start[cell[j] + 1] += 1
+    for c in range(nx * ny):
+        start[c + 1] += start[c]
+    r2 = radius * radius
+    n = 0
+    for i in range(a.shape[0]):
+        fx, fy = (a[i, 0] - x0) / radius, (a[i, 1] - y0) / radius
+        if not (fx > -1.0 and fy > -1.0 and fx < nx + 1.0 and fy < ny + 1.0):  # also NaN
+            continue
+        cx, cy = math.floor(fx), math.floor(fy)
+        for gy in range(max(cy - 1, 0), min(cy + 2, ny)):
+            for gx in range(max(cx - 1, 0), min(cx + 2, nx)):
+                c = gy * nx + gx
+                for t in range(start[c], start[c + 1]):
+                    j = order[t]
+                    dx, dy = a[i, 0] - b[j, 0], a[i, 1] - b[j, 1]
+                    if dx * dx + dy * dy <= r2:
+                        if not count_only:
+                            out_a[n], out_b[n] = i, j
+                        n += 1
+    return n
+
+
+def radius_pairs(a: NDArray[np.float64], b: NDArray[np.float64], radius: float
+                 ) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """All index pairs (i, j) with ‖a[i] − b[j]‖ ≤ ``radius`` for 2-D points (N, 2) and (M, 2), by a uniform grid
+    (what ``cKDTree.sparse_distance_matrix`` finds, in another order, ~10× faster for image keypoints)."""
+    a = np.ascontiguousarray(a, np.float64)
+    b = np.ascontiguousarray(b, np.float64)
+    if len(a) == 0 or len(b) == 0 or not radius > 0.0:
+        return np.zeros(0, np.intp), np.zeros(0, np.intp)
+    none = np.zeros(0, np.int64)
+    n = _grid_pairs(a, b, radius, True, none, none)
+    ia, ib = np.empty(n, np.int64), np.empty(n, np.int64)
+    _grid_pairs(a, b, radius, False, ia, ib)
+    return ia.astype(np.intp), ib.astype(np.intp)
+
+
 def match_landmarks(
     points_ref: NDArray[np.float64],
     descriptors_ref: NDArray[np.generic],
@@ -443,13 +494,10 @@ def match_landmarks(
         idx_front = np.flatnonzero(front)
         if idx_front.size == 0:
             return empty
-        pairs = cKDTree(uv_pred[idx_front]).sparse_distance_matrix(
-            cKDTree(np.asarray(uv_cur, np.float64)), radius_px, output_type="ndarray"
-        )
-        if pairs.size == 0:
+        ia, ib = radius_pairs(uv_pred[idx_front], np.asarray(uv_cur, np.float64), radius_px)
+        if ia.size == 0:
             return empty
-        ia = idx_front[pairs["i"].astype(np.intp)]
-        ib = pairs["j"].astype(np.intp)
+        ia = idx_front[ia]
         i_ref, i_cur, dist = match_descriptors(descriptors_ref, descriptors_cur, kind, ratio=ratio, mutual=mutual,
                                                candidates=(ia, ib), max_distance=max_distance)
     else:

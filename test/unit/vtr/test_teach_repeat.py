@@ -395,6 +395,25 @@ def test_prosac_sampling_finds_a_few_inliers_among_many_matches():
     with pytest.raises(VtrInputError, match="quality"):
         estimate_pose_stereo(P_ref, uv, d, camera, quality=distance[:-1], ordered_fraction=0.5)
 
+def test_radius_pairs_equal_the_kd_tree_pairs():
+    """The grid search of guided matching finds exactly the pairs within the radius (scipy's k-d tree as the
+    reference), with points outside the image, NaN predictions and an empty side."""
+    from scipy.spatial import cKDTree
+
+    from lightfast.vtr.visual_odometry import radius_pairs
+
+    rng = np.random.default_rng(4)
+    a = np.c_[rng.uniform(-80, 720, 3000), rng.uniform(-80, 560, 3000)]
+    a[:10] = np.nan
+    b = np.c_[rng.uniform(0, 640, 800), rng.uniform(0, 480, 800)]
+    for radius in (0.5, 12.0, 40.0, 1000.0):
+        ia, ib = radius_pairs(a, b, radius)
+        ref = cKDTree(a[10:]).sparse_distance_matrix(cKDTree(b), radius, output_type="ndarray")
+        assert set(zip(ia.tolist(), ib.tolist(), strict=True)) == set(
+            zip((ref["i"] + 10).tolist(), ref["j"].tolist(), strict=True)), radius
+    assert radius_pairs(a, b[:0], 40.0)[0].size == 0
+
+
 # --------------------------------------------------------------------------------------------------------------
 # Teach
 
@@ -491,13 +510,14 @@ def test_fused_localizes_under_illuminant_change_where_grey_fails(taught: Taught
     assert loc.mean() >= 0.9, summary(fused)
     assert np.median(t_err) < TOL_MEDIAN_M and t_err.max() < TOL_MAX_M, (np.median(t_err), t_err.max())
     assert r_err.max() < TOL_ROT_DEG, r_err.max()
-    # the colour-constant sources carry the localization, greyscale adds almost nothing
+    # the colour-constant sources carry the localization, greyscale adds almost nothing (a tenth of their inliers)
     med = {s: np.median([r.inliers_per_source[s] for r in fused if r.localized]) for s in ("grey", "fv", "fr")}
-    assert med["fv"] >= 20 and med["fr"] >= 20 and med["grey"] < 10, med
-    # greyscale alone (legacy) localizes (almost) nowhere: the robot drives on VO and would stop after 20 m
-    _, _, g_loc = pose_errors(taught, grey)
-    assert g_loc.mean() <= 0.1, summary(grey)
-    assert all(r.failure for r in grey)  # never localized: no pose to drive on
+    assert med["fv"] >= 20 and med["fr"] >= 20 and med["grey"] < 0.1 * min(med["fv"], med["fr"]), med
+    # greyscale alone (legacy) never localizes correctly: none of its localizations is within the fused mode's
+    # tolerance; they are wrong consensus sets among random matches (measured with the row-search stereo matching:
+    # 9 of 21, 0.39-0.76 m off; none with descriptor matching, which triangulates fewer landmarks)
+    g_err, _, g_loc = pose_errors(taught, grey)
+    assert g_loc.mean() <= 0.5 and np.all(g_err > TOL_MAX_M), (summary(grey), g_err)
     # McManus et al. (colour-constant only when grey fails, one source): localizes, no better than fused
     _, _, m_loc = pose_errors(taught, mcmanus)
     assert m_loc.mean() >= 0.8 and m_loc.sum() <= loc.sum() + 1, summary(mcmanus)
