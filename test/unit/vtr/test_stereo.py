@@ -230,3 +230,25 @@ def test_search_stereo_rejects_ambiguous_and_inconsistent_matches():
     idx, d, _ = search_stereo(left, right, uv, cfg)
     assert idx.size > 0.3 * len(uv) and np.all(d == 15)
     assert np.all(uv[idx, 0] - 15 >= W // 2 - 4)  # matches only where the right image shows the scene
+
+
+@pytest.mark.parametrize("matching", ["descriptor", "search"])
+def test_threaded_front_end_equals_sequential(stereo_pair, matching: str):
+    """SourceFrontEnd with a thread pool (detections, or whole sources with the row search, run in the pool) gives
+    exactly the landmarks of the sequential front end, read in any order."""
+    from lightfast.vtr import SourceFrontEnd
+
+    left, right = stereo_pair
+    cfg = StereoConfig(stereo_matching=matching)
+    sequential = SourceFrontEnd(("grey", "fv", "fr"), cfg).process(left, right, P_LEFT, P_RIGHT)
+    threaded = SourceFrontEnd(("grey", "fv", "fr"), cfg, workers=2)
+    try:
+        pending = threaded.submit(left, right, P_LEFT, P_RIGHT)
+        for name in ("fr", "grey", "fv"):
+            a, b = pending[name], sequential[name]
+            assert len(a) > 300
+            np.testing.assert_array_equal(a.uv_left, b.uv_left)
+            np.testing.assert_array_equal(a.points, b.points)
+            np.testing.assert_array_equal(a.descriptors, b.descriptors)
+    finally:
+        threaded.close()
