@@ -20,7 +20,8 @@ v1's colour and depth cameras are not registered in 7-Scenes (PROVENANCE.md).
 
 Each chained trajectory is compared with the ground truth by ATE RMSE after a rigid Umeyama alignment
 (:func:`lightfast.tracking.ate_rmse`), by the mean ATE of 100-frame windows, by the drift over 1 s (RMSE of the
-translation error of 30-frame motions) and by the median frame-to-frame error (RPE); time per frame includes the image pyramid / tensor preparation. Prints a
+translation error of 30-frame motions) and by the median frame-to-frame error (RPE);
+time per frame includes the image pyramid / tensor preparation. Prints a
 markdown table and writes it atomically to ``--output`` (default ``benchmarks/results/tracking_7scenes.md``).
 
 Usage: ``.venv/bin/python benchmarks/tracking_7scenes.py [--first 0] [--last 299]``
