@@ -411,14 +411,16 @@ def _kabsch_batch(P: NDArray[np.float64], Q: NDArray[np.float64]) -> NDArray[np.
 @numba.njit(cache=True, nogil=True)
 def _grid_pairs(a: NDArray[np.float64], b: NDArray[np.float64], radius: float, count_only: bool,
                 out_a: NDArray[np.int64], out_b: NDArray[np.int64]) -> int:
-    """Pairs (i, j) with |a[i] − b[j]| ≤ radius: ``b`` bucketed in square cells of side ``radius``, each ``a``
-    checked against the 3×3 cells around it. Counts them (``count_only``) or writes them to ``out_a``, ``out_b``."""
+    """Pairs (i, j) with |a[i] − b[j]| ≤ radius: ``b`` (finite) bucketed in square cells of side ≥ ``radius`` (at
+    most ~1000 per axis), each ``a`` checked against the 3×3 cells around it. Counts them (``count_only``) or writes
+    them to ``out_a``, ``out_b``."""
     x0, y0 = b[:, 0].min(), b[:, 1].min()
-    nx = int((b[:, 0].max() - x0) / radius) + 1
-    ny = int((b[:, 1].max() - y0) / radius) + 1
+    side = max(radius, (b[:, 0].max() - x0) / 1000.0, (b[:, 1].max() - y0) / 1000.0)
+    nx = int((b[:, 0].max() - x0) / side) + 1
+    ny = int((b[:, 1].max() - y0) / side) + 1
     cell = np.empty(b.shape[0], np.int64)
     for j in range(b.shape[0]):
-        cell[j] = int((b[j, 1] - y0) / radius) * nx + int((b[j, 0] - x0) / radius)
+        cell[j] = int((b[j, 1] - y0) / side) * nx + int((b[j, 0] - x0) / side)
     order = np.argsort(cell, kind="mergesort")
     start = np.zeros(nx * ny + 1, np.int64)
     for j in range(b.shape[0]):
@@ -428,7 +430,7 @@ def _grid_pairs(a: NDArray[np.float64], b: NDArray[np.float64], radius: float, c
     r2 = radius * radius
     n = 0
     for i in range(a.shape[0]):
-        fx, fy = (a[i, 0] - x0) / radius, (a[i, 1] - y0) / radius
+        fx, fy = (a[i, 0] - x0) / side, (a[i, 1] - y0) / side
         if not (fx > -1.0 and fy > -1.0 and fx < nx + 1.0 and fy < ny + 1.0):  # also NaN
             continue
         cx, cy = math.floor(fx), math.floor(fy)

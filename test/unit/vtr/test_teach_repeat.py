@@ -406,12 +406,14 @@ def test_radius_pairs_equal_the_kd_tree_pairs():
     a = np.c_[rng.uniform(-80, 720, 3000), rng.uniform(-80, 560, 3000)]
     a[:10] = np.nan
     b = np.c_[rng.uniform(0, 640, 800), rng.uniform(0, 480, 800)]
-    for radius in (0.5, 12.0, 40.0, 1000.0):
+    for radius in (1e-4, 0.5, 12.0, 40.0, 1000.0):  # 1e-4: cells of extent / 1000, not of the radius
         ia, ib = radius_pairs(a, b, radius)
         ref = cKDTree(a[10:]).sparse_distance_matrix(cKDTree(b), radius, output_type="ndarray")
         assert set(zip(ia.tolist(), ib.tolist(), strict=True)) == set(
             zip((ref["i"] + 10).tolist(), ref["j"].tolist(), strict=True)), radius
     assert radius_pairs(a, b[:0], 40.0)[0].size == 0
+    ia, ib = radius_pairs(b[:5], b[:5], 1e-4)  # each point pairs with itself only
+    assert sorted(zip(ia.tolist(), ib.tolist(), strict=True)) == [(k, k) for k in range(5)]
 
 
 # --------------------------------------------------------------------------------------------------------------
