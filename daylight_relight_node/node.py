@@ -53,6 +53,7 @@ from lightfast.ros.convert import (
 from lightfast.ros.diagnostics import Level, ProblemLog, diagnostic_array, diagnostic_status, log_at
 from lightfast.ros.params import ConfigParameters
 from lightfast.ros.qos import SENSOR_QOS
+from lightfast.ros.ready import announce_ready
 from lightfast.ros.runtime import run_node
 from lightfast.ros.sync import ExactTimePairs
 from lightfast.ros.worker import StepWorker
@@ -143,6 +144,7 @@ class DaylightRelightNode(Node):
             f"lighting map {cfg.lighting_map}: {lmap.num_vertices} vertices; camera response {cfg.crf_file}; "
             f"reference {cfg.reference}, method {cfg.method}; waiting for the first complete sun epoch"
         )
+        self._ready_pub = announce_ready(self)  # for `lightfast wait-ready` in launch-free scripts
 
     # ---------------------------------------------------------------------------------------------- helpers
 

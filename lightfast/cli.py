@@ -205,6 +205,16 @@ def _add_passthrough(subparsers: argparse._SubParsersAction, name: str, target: 
     p.set_defaults(func=run_target)
 
 
+def _cmd_wait_ready(args: argparse.Namespace) -> int:
+    from lightfast.ros.ready import process_alive, wait_ready
+    from lightfast.ros.runtime import ros_session
+
+    pids = tuple(args.pid or ())
+    with ros_session("lightfast_wait_ready", domain_id=args.domain_id, install_signal_handlers=False) as (node, ex):
+        wait_ready(node, ex, args.nodes, timeout_s=args.timeout, alive=lambda: all(map(process_alive, pids)))
+    return 0
+
+
 def _cmd_dds_env(_args: argparse.Namespace) -> int:
     from lightfast.ros.transport import local_transport_env
 
@@ -338,6 +348,14 @@ def build_parser() -> argparse.ArgumentParser:
                      "VT&R Table I / Fig. 7: autonomy by distance over the simulated day (see `eval vtr --help`)")
     _add_passthrough(ev_sub, "recording", "lightfast.eval.recording:main_eval_recording",
                      "score a recorded live run of the tracking nodes against the played bag's ground truth")
+
+    p = sub.add_parser("wait-ready", help="wait until lightfast nodes announce that they can take data (for "
+                       "launch-free scripts; exit 1 on timeout or when a --pid process ends first)")
+    p.add_argument("nodes", nargs="+", metavar="NODE", help="node names, e.g. rgbd_tracker_node")
+    p.add_argument("--timeout", type=float, default=300.0, help="seconds to wait (default 300)")
+    p.add_argument("--pid", type=int, action="append", help="fail as soon as this process ends (repeatable)")
+    p.add_argument("--domain-id", type=int, default=None, help="DDS domain (default: ROS_DOMAIN_ID)")
+    p.set_defaults(func=_cmd_wait_ready)
 
     dds = sub.add_parser("dds", help="DDS transport settings")
     dds_sub = dds.add_subparsers(dest="dds_command", required=True, metavar="DDS_COMMAND")

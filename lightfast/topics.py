@@ -65,3 +65,5 @@ RACR_CAMERA_POSE_TOPIC = "/racr/camera_pose"  # PoseStamped T_ref_cam, the curre
 # racr_node never subscribes to it
 SIM_CAMERA_POSE_TOPIC = "/sim/ground_truth/camera_pose"  # PoseStamped T_world_cam (true camera pose)
 SIM_WORLD_FRAME = "world"
+# readiness: each node publishes its name here (std_msgs/String, latched) once it can take data
+READY_TOPIC = "/lightfast/ready"

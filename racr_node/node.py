@@ -86,6 +86,7 @@ from lightfast.ros.racr_msgs import (
     transform_stamped_to_matrix,
     vse_cloud_to_arrays,
 )
+from lightfast.ros.ready import announce_ready
 from lightfast.ros.runtime import run_node
 from lightfast.sim.racr_scenes import ReferenceObservation, load_reference
 from lightfast.topics import (
@@ -171,6 +172,7 @@ class RacrNode(Node):
         self.create_subscription(PoseStamped, PLATFORM_STOPPED_TOPIC, self._on_platform_stopped, SENSOR_QOS)
         self.create_timer(cfg.adjust_period_s, self._tick)
         self.create_timer(cfg.status_period_s, self._heartbeat)
+        self._ready_pub = announce_ready(self)  # for `lightfast wait-ready` in launch-free scripts
         self._load_reference()
 
     # ---------------------------------------------------------------------------------------------- helpers

@@ -51,6 +51,7 @@ from lightfast.ros.convert import (
 from lightfast.ros.diagnostics import Level, ProblemLog, diagnostic_array, diagnostic_status, log_at
 from lightfast.ros.params import ConfigParameters
 from lightfast.ros.qos import SENSOR_QOS
+from lightfast.ros.ready import announce_ready
 from lightfast.ros.runtime import run_node
 from lightfast.ros.sync import ExactTimePairs
 from lightfast.ros.worker import StepWorker
@@ -157,6 +158,7 @@ class RGBDTrackerNode(Node):
         self._f2m_worker = StepWorker("tracker-f2m", self._refine_work, self._on_step_error)
         self.get_logger().info(f"mode {cfg.mode}, reference timeout {cfg.reference_timeout_s} s, start pose "
                                f"{list(cfg.initial_pose)}; kernels warmed up in {warm_s:.2f} s")
+        self._ready_pub = announce_ready(self)  # for `lightfast wait-ready` in launch-free scripts
 
     # ---------------------------------------------------------------------------------------------- helpers
 

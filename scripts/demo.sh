@@ -89,13 +89,12 @@ fi
 recorder=$!
 pids+=($recorder)
 
-# each node logs one line once it is ready: the sun update node once its patch transport is built (only then can it
-# use the clock's preroll), the others once their kernels are compiled or loaded from numba's cache (on a fresh clone
-# that takes a minute; the player's wait for subscribers does not cover it: the tracker alone subscribes to every
-# topic it plays)
-wait_for_line "$logs/sun_update_node.log" "patches; site" "${pids[0]}"
-wait_for_line "$logs/daylight_relight_node.log" "vertices; camera response" "${pids[1]}"
-wait_for_line "$logs/rgbd_tracker_node.log" "kernels warmed up" "${pids[2]}"
+# each node announces itself on /lightfast/ready once it can take data: the sun update node once its lighting map
+# is loaded (only then can it use the clock's preroll), the others once their kernels are compiled or loaded from
+# numba's cache (on a fresh clone that takes a minute; the player's wait for subscribers does not cover it: the
+# tracker alone subscribes to every topic it plays). A node that dies while starting fails the wait at once.
+"$lf" wait-ready sun_update_node daylight_relight_node rgbd_tracker_node --timeout 300 \
+  --pid "${pids[0]}" --pid "${pids[1]}" --pid "${pids[2]}" || { echo "the nodes did not start: see $logs" >&2; exit 1; }
 # the clock runs $preroll s before the first frame: time for the first sun update epoch to stream in
 echo "== playing $seq_dir/bag at rate $rate with /clock ($preroll s preroll)"
 # /clock at 20 Hz between frames (and before each frame): every node on sim time takes each clock message

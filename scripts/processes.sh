@@ -24,16 +24,6 @@ cleanup() {
 }
 trap cleanup EXIT
 trap 'echo "interrupted"; exit 130' INT TERM
-wait_for_line() {  # wait_for_line FILE PATTERN PID [TIMEOUT_S]: until FILE has a line matching PATTERN; fails when
-  local file=$1 pattern=$2 pid=$3 timeout_s=${4:-300} i  # PID ends first or after TIMEOUT_S (default 300)
-  for ((i = 0; i < timeout_s * 10; i++)); do
-    grep -q "$pattern" "$file" 2>/dev/null && return 0
-    kill -0 "$pid" 2>/dev/null || { echo "process $pid ended before logging '$pattern': see $file" >&2; return 1; }
-    sleep 0.1
-  done
-  echo "no '$pattern' in $file after $timeout_s s" >&2
-  return 1
-}
 cpu_seconds() {  # cpu_seconds PID: user + system CPU seconds the process has used so far (0 if it is gone)
   local stat
   stat=$(cat "/proc/$1/stat" 2>/dev/null) || { echo 0; return; }

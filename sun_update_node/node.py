@@ -24,6 +24,7 @@ from lightfast.errors import LightfastError
 from lightfast.ros.convert import make_header, numpy_to_pointcloud2
 from lightfast.ros.params import ConfigParameters
 from lightfast.ros.qos import LATCHED_QOS, SENSOR_QOS
+from lightfast.ros.ready import announce_ready
 from lightfast.ros.runtime import run_node
 from lightfast.topics import SUN_CHUNK_TOPIC, SUN_DIRECTION_TOPIC
 
@@ -56,6 +57,7 @@ class SunUpdateNode(Node):
             f"lighting map {cfg.lighting_map}: {lmap.num_vertices} vertices, {lmap.patches.count} patches; "
             f"site {self.pipeline.site.latitude_deg:.4f}, {self.pipeline.site.longitude_deg:.4f}"
         )
+        self._ready_pub = announce_ready(self)  # for `lightfast wait-ready` in launch-free scripts
 
     def _now_ns(self) -> int | None:
         now = self.get_clock().now().nanoseconds

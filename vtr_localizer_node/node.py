@@ -85,6 +85,7 @@ from lightfast.ros.convert import (
 from lightfast.ros.diagnostics import Level, ProblemLog, diagnostic_array, diagnostic_status, log_at
 from lightfast.ros.params import ConfigParameters
 from lightfast.ros.qos import SENSOR_QOS
+from lightfast.ros.ready import announce_ready
 from lightfast.ros.runtime import run_node
 from lightfast.ros.sync import ExactTimePairs
 from lightfast.topics import (
@@ -224,6 +225,7 @@ class VtrLocalizerNode(Node):
         else:
             self.get_logger().info(f"repeat ({cfg.repeat_mode}) against the map at {self.map_path}")
             self._load_map()
+        self._ready_pub = announce_ready(self)  # for `lightfast wait-ready` in launch-free scripts
 
     # ---------------------------------------------------------------------------------------------- helpers
 

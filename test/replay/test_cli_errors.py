@@ -53,3 +53,16 @@ def test_compare_exit_code_and_usage(tmp_path: Path) -> None:
     result = run_bounded([*LIGHTFAST, "bag", "compare", str(a), str(tmp_path / "nope")], timeout_s=60)
     assert result.returncode == 1 and "no bag at" in result.stderr
     assert run_bounded([*LIGHTFAST, "bag", "frobnicate"], timeout_s=60).returncode == 2
+
+
+def test_wait_ready_times_out_or_fails_on_a_dead_process_with_one_line(domain_id: int) -> None:
+    """`lightfast wait-ready` (launch-free scripts): nobody announces -> exit 1 naming the missing node after the
+    timeout; a --pid process that is gone -> exit 1 at once."""
+    result = run_bounded([*LIGHTFAST, "wait-ready", "no_such_node", "--timeout", "1"], timeout_s=60,
+                         env=child_env(domain_id))
+    assert result.returncode == 1 and "Traceback" not in result.stderr
+    assert result.stderr.strip().splitlines() == ["lightfast: error: not ready after 1 s: no_such_node (ready: none)"]
+    beyond_pid_max = "999999999"  # no such process
+    dead = run_bounded([*LIGHTFAST, "wait-ready", "no_such_node", "--timeout", "30", "--pid", beyond_pid_max],
+                       timeout_s=60, env=child_env(domain_id))
+    assert dead.returncode == 1 and "watched process ended" in dead.stderr
