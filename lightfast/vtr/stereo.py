@@ -183,6 +183,11 @@ class StereoConfig(Config):
     min_depth_m: float = param(0.1, description="Landmarks nearer than this are dropped, m.", min=0.0)
     max_depth_m: float = param(200.0, description="Landmarks farther than this are dropped, m.", min=0.0)
 
+    @property
+    def detects_right(self) -> bool:
+        """Whether the left–right matching needs features of the right image (``"descriptor"``; not the search)."""
+        return self.stereo_matching == "descriptor"
+
     def check(self) -> None:
         if self.max_disparity_px <= self.min_disparity_px:
             raise ConfigError(
@@ -849,8 +854,7 @@ class StereoFrontEnd:
 
     @property
     def detects_right(self) -> bool:
-        """Whether the left–right matching needs features of the right image (not with ``"search"``)."""
-        return self.config.stereo_matching == "descriptor"
+        return self.config.detects_right
 
     def landmarks(self, left: SourceImage, right: SourceImage, fl: Features, fr: Features | None,
                   P_left: ArrayLike, P_right: ArrayLike) -> StereoFeatures:

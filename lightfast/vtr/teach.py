@@ -107,7 +107,7 @@ class SourceFrontEnd:
         self._pool = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="vtr-front") if workers > 1 else None
         # a second detector per source, so that the left and right detections can run concurrently
         self._right = ({s: FeatureExtractor(self.stereo) for s in self.sources}
-                       if self._pool is not None and self.stereo.stereo_matching == "descriptor" else {})
+                       if self._pool is not None and self.stereo.detects_right else {})
 
     @property
     def kind(self) -> str:
@@ -146,7 +146,7 @@ class SourceFrontEnd:
             return PendingFeatures({s: self._fronts[s].source_features(ls[s], rs[s], Pl, Pr) for s in wanted})
         images = [pool.submit(image_sources, im, self.color, wanted) for im in (left, right)]
         ls, rs = images[0].result(), images[1].result()
-        if not self._right:  # no right-image detection: each source's whole front end is one job
+        if not self.stereo.detects_right:  # no right-image detection: each source's whole front end is one job
             jobs = {s: pool.submit(self._fronts[s].source_features, ls[s], rs[s], Pl, Pr) for s in wanted}
             return PendingFeatures({}, {s: jobs[s].result for s in wanted})
         detections = {s: (pool.submit(self._fronts[s].extractor.detect, ls[s].image, ls[s].valid),

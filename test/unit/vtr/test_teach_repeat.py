@@ -27,6 +27,7 @@ import hashlib
 import itertools
 import json
 import zipfile
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -335,25 +336,34 @@ def _few_correct_matches(rng: np.random.Generator, T_ref_cur: np.ndarray, n: int
     return P_ref, uv, d
 
 
-def test_distance_consistent_sampling_finds_a_few_inliers_among_many_matches():
-    """12 correct matches among 200 (the whole-map search under changed lighting): 1000 uniform hypotheses rarely
-    find them; with half the hypotheses from distance-consistent triples nearly always, at the right pose."""
+def _successes_by_fraction(seed0: int, sampler: Callable[[np.random.Generator], Callable[[float], dict]]
+                           ) -> dict[float, int]:
+    """Over 20 seeded trials of 12 correct matches among 200 (:func:`_few_correct_matches`): how often 1000 RANSAC
+    hypotheses find them with fraction 0 (uniform) and 0.5 of the sampler whose options ``sampler(rng)(fraction)``
+    gives (drawn after the matches); every success is checked to be at the right pose with ≤ 2 wrong inliers."""
     camera = StereoCamera.from_projections(P_LEFT, P_RIGHT)
     T_ref_cur = pose(0.1, 0.3, 1.0)
+    n_in = 12
     found = {0.0: 0, 0.5: 0}
     for trial in range(20):
-        rng = np.random.default_rng(100 + trial)
-        n, n_in = 200, 12
-        P_ref, uv, d = _few_correct_matches(rng, T_ref_cur, n, n_in)
+        rng = np.random.default_rng(seed0 + trial)
+        P_ref, uv, d = _few_correct_matches(rng, T_ref_cur, 200, n_in)
+        options = sampler(rng)
         for fraction in found:
             est = estimate_pose_stereo(P_ref, uv, d, camera, threshold_px=3.0, iterations=1000, min_inliers=6,
-                                       seed=trial, consistent_fraction=fraction)
+                                       seed=trial, **options(fraction))
             if est.success:
                 assert np.linalg.norm(est.T_ref_cur[:3, 3] - T_ref_cur[:3, 3]) < 0.05
                 assert est.inliers[n_in:].sum() <= 2
                 found[fraction] += 1
-    assert found[0.0] <= 6 and found[0.5] >= 16, found  # measured: 0 and 18 of 20
+    return found
 
+
+def test_distance_consistent_sampling_finds_a_few_inliers_among_many_matches():
+    """12 correct matches among 200 (the whole-map search under changed lighting): 1000 uniform hypotheses rarely
+    find them; with half the hypotheses from distance-consistent triples nearly always, at the right pose."""
+    found = _successes_by_fraction(100, lambda rng: lambda fraction: {"consistent_fraction": fraction})
+    assert found[0.0] <= 6 and found[0.5] >= 16, found  # measured: 0 and 18 of 20
 
 
 def test_prosac_sampling_draws_the_most_distinctive_matches_first():
@@ -376,24 +386,18 @@ def test_prosac_sampling_draws_the_most_distinctive_matches_first():
 def test_prosac_sampling_finds_a_few_inliers_among_many_matches():
     """12 correct matches among 200 whose descriptor distances are lower on average (overlapping): half the
     hypotheses by PROSAC find them nearly always, 1000 uniform ones rarely."""
-    camera = StereoCamera.from_projections(P_LEFT, P_RIGHT)
-    T_ref_cur = pose(0.1, 0.3, 1.0)
-    found = {0.0: 0, 0.5: 0}
-    for trial in range(20):
-        rng = np.random.default_rng(200 + trial)
-        n, n_in = 200, 12
-        P_ref, uv, d = _few_correct_matches(rng, T_ref_cur, n, n_in)
-        distance = np.r_[rng.normal(40, 12, n_in), rng.normal(60, 12, n - n_in)]  # Hamming-like, overlapping
-        for fraction in found:
-            est = estimate_pose_stereo(P_ref, uv, d, camera, threshold_px=3.0, iterations=1000, min_inliers=6,
-                                       seed=trial, quality=distance, ordered_fraction=fraction)
-            if est.success:
-                assert np.linalg.norm(est.T_ref_cur[:3, 3] - T_ref_cur[:3, 3]) < 0.05
-                assert est.inliers[n_in:].sum() <= 2
-                found[fraction] += 1
+
+    def prosac(rng: np.random.Generator) -> Callable[[float], dict]:
+        distance = np.r_[rng.normal(40, 12, 12), rng.normal(60, 12, 188)]  # Hamming-like, overlapping
+        return lambda fraction: {"quality": distance, "ordered_fraction": fraction}
+
+    found = _successes_by_fraction(200, prosac)
     assert found[0.0] <= 6 and found[0.5] >= 16, found
+    P_ref, uv, d = _few_correct_matches(np.random.default_rng(0), pose(0.1, 0.3, 1.0), 200, 12)
     with pytest.raises(VtrInputError, match="quality"):
-        estimate_pose_stereo(P_ref, uv, d, camera, quality=distance[:-1], ordered_fraction=0.5)
+        estimate_pose_stereo(P_ref, uv, d, StereoCamera.from_projections(P_LEFT, P_RIGHT), quality=np.ones(199),
+                             ordered_fraction=0.5)
+
 
 def test_radius_pairs_equal_the_kd_tree_pairs():
     """The grid search of guided matching finds exactly the pairs within the radius (scipy's k-d tree as the
