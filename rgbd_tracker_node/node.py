@@ -139,7 +139,7 @@ class RGBDTrackerNode(Node):
         self._reset: tuple[np.ndarray, int | None] | None = None
         self._new_config: TrackerConfig | None = None
         self.params.on_change = self._on_config
-        self.stats = {"frames_in": 0, "frames_tracked": 0, "f2m": 0, "f2f": 0, "dropped_behind": 0,
+        self.stats = {"frames_in": 0, "references_in": 0, "frames_tracked": 0, "f2m": 0, "f2f": 0, "dropped_behind": 0,
                       "dropped_unpaired": 0, "late_references": 0, "superseded_references": 0, "bad_inputs": 0}
 
         self.coarse_pub = self.create_publisher(PoseStamped, COARSE_POSE_TOPIC, SENSOR_QOS)
@@ -234,6 +234,7 @@ class RGBDTrackerNode(Node):
 
     def _enqueue_ref(self, stamp: int, pair: tuple[np.ndarray, np.ndarray] | None) -> None:
         if pair is not None:
+            self.stats["references_in"] += 1
             self._ref_queue.append((stamp, *pair))
             self._f2m_worker.wake()
 
