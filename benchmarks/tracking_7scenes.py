@@ -168,6 +168,8 @@ def main() -> int:
     gt = np.stack([f.T_world_cam for f in raw])
     cam = ds.camera
     small_frames, small_cam = _resize(frames, cam)
+    for scale in (1.0, 0.5):  # numba compiles on first use (and after a move of the source): not a frame's time
+        track_sequence(frames[:2], cam, config=TrackingConfig(resolution_scale=scale))
 
     runs: list[tuple[str, str, Callable[[], tuple[NDArray[np.float64], float]]]] = [
         ("Open3D hybrid (defaults)", "640×480", lambda: _o3d_track(frames, cam, w_G=None)),
