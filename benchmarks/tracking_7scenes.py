@@ -216,7 +216,7 @@ def main() -> int:
         poses, ms = fn()
         ates[(name, res)] = [100.0 * ate_rmse(poses, gt)]
         rpe_mm, rpe_deg = _rpe(poses, gt)
-        rows.append((name, res, 100.0 * ate_rmse(poses, gt), _windowed_ate_cm(poses, gt), _drift_mm(poses, gt),
+        rows.append((name, res, ates[(name, res)][0], _windowed_ate_cm(poses, gt), _drift_mm(poses, gt),
                      rpe_mm, rpe_deg, ms))
         print(f"{name:45s} {res:8s} ATE {rows[-1][2]:6.2f} cm (windows {rows[-1][3]:5.2f})  drift "
               f"{rows[-1][4]:5.1f} mm/s  RPE {rpe_mm:5.2f} mm {rpe_deg:5.3f} deg  {ms:7.1f} ms/frame", flush=True)
