@@ -155,8 +155,8 @@ def front_end_stages(scene: Scene, frames: list, stereo: StereoConfig) -> dict[s
     work, independent of the other jobs on the machine)."""
     color = ColorConstantConfig()
     front = StereoFrontEnd(stereo, color, sources=SOURCES)
-    n_images = 2 * len(SOURCES) if front.detects_right else len(SOURCES)
-    how = "descriptor" if front.detects_right else "row search"
+    n_images = 2 * len(SOURCES) if stereo.detects_right else len(SOURCES)
+    how = "descriptor" if stereo.detects_right else "row search"
     out: dict[str, list[float]] = {"colour-constant + grey images": [], f"feature detection ({n_images} images)": [],
                                    f"left-right matching ({how}), sub-pixel, triangulation": []}
     for left, right in frames:
@@ -164,7 +164,7 @@ def front_end_stages(scene: Scene, frames: list, stereo: StereoConfig) -> dict[s
         ls, rs = image_sources(left, color, SOURCES), image_sources(right, color, SOURCES)
         t1 = time.thread_time()
         feats = {s: (front.extractor.detect(ls[s].image, ls[s].valid),
-                     front.extractor.detect(rs[s].image, rs[s].valid) if front.detects_right else None)
+                     front.extractor.detect(rs[s].image, rs[s].valid) if stereo.detects_right else None)
                  for s in SOURCES}
         t2 = time.thread_time()
         for s in SOURCES:

@@ -533,6 +533,16 @@ def match_stereo(
     )
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _box_var(sum_b: NDArray[np.float64], sq_b: NDArray[np.float64], y0: int, x0: int, side: int) -> float:
+    """Sum of squared deviations from the mean of the side×side patch at (y0, x0) (top-left), from the integral
+    images of the values and their squares."""
+    y1, x1 = y0 + side, x0 + side
+    s1 = sum_b[y1, x1] - sum_b[y0, x1] - sum_b[y1, x0] + sum_b[y0, x0]
+    s2 = sq_b[y1, x1] - sq_b[y0, x1] - sq_b[y1, x0] + sq_b[y0, x0]
+    return s2 - s1 * s1 / (side * side)
+
+
 @numba.njit(cache=True, nogil=True)
 def _zncc_row_search(a: NDArray[np.float32], b: NDArray[np.float32], sum_b: NDArray[np.float64],
                      sq_b: NDArray[np.float64], us: NDArray[np.int64], vs: NDArray[np.int64], d_lo: int, d_hi: int,
@@ -590,13 +600,9 @@ def _zncc_row_search(a: NDArray[np.float32], b: NDArray[np.float32], sum_b: NDAr
                 seg = row[c0 - r + j:c0 - r + j + nc]  # a slice: its index q >= 0 needs no wraparound check
                 for q in range(nc):
                     dot[q] += p * seg[q]
-        y0, y1 = v - r, v + r + 1
         best, arg = -2.0, -1
         for q in range(nc):
-            x0, x1 = c0 + q - r, c0 + q + r + 1
-            s1 = sum_b[y1, x1] - sum_b[y0, x1] - sum_b[y1, x0] + sum_b[y0, x0]
-            s2 = sq_b[y1, x1] - sq_b[y0, x1] - sq_b[y1, x0] + sq_b[y0, x0]
-            var_b = s2 - s1 * s1 / npx
+            var_b = _box_var(sum_b, sq_b, v - r, c0 + q - r, side)
             z = dot[q] / (norm_a * math.sqrt(var_b)) if var_b > 1e-6 else -2.0
             dot[q] = z
             if z > best:
@@ -614,9 +620,7 @@ def _zncc_row_search(a: NDArray[np.float32], b: NDArray[np.float32], sum_b: NDAr
             y0 = v - r + dv
             if y0 < 0 or y0 + side > h:
                 continue
-            s1 = sum_b[y0 + side, c + r + 1] - sum_b[y0, c + r + 1] - sum_b[y0 + side, c - r] + sum_b[y0, c - r]
-            s2 = sq_b[y0 + side, c + r + 1] - sq_b[y0, c + r + 1] - sq_b[y0 + side, c - r] + sq_b[y0, c - r]
-            var_b = s2 - s1 * s1 / npx
+            var_b = _box_var(sum_b, sq_b, y0, c - r, side)
             if var_b <= 1e-6:
                 continue
             acc = 0.0
@@ -849,12 +853,8 @@ class StereoFrontEnd:
             raise VtrInputError(f"left image {left.image.shape} and right image {right.image.shape} differ in size")
         Pl, Pr = check_stereo_pair(P_left, P_right)
         fl = self.extractor.detect(left.image, left.valid)
-        fr = self.extractor.detect(right.image, right.valid) if self.detects_right else None
+        fr = self.extractor.detect(right.image, right.valid) if self.config.detects_right else None
         return self.landmarks(left, right, fl, fr, Pl, Pr)
-
-    @property
-    def detects_right(self) -> bool:
-        return self.config.detects_right
 
     def landmarks(self, left: SourceImage, right: SourceImage, fl: Features, fr: Features | None,
                   P_left: ArrayLike, P_right: ArrayLike) -> StereoFeatures:
@@ -865,7 +865,7 @@ class StereoFrontEnd:
         if left.image.shape != right.image.shape:
             raise VtrInputError(f"left image {left.image.shape} and right image {right.image.shape} differ in size")
         Pl, Pr = check_stereo_pair(P_left, P_right)
-        if self.detects_right:
+        if c.detects_right:
             if fr is None:
                 raise VtrInputError("descriptor left-right matching needs the right image's features")
             il, ir, dist = match_stereo(fl, fr, c)
@@ -883,7 +883,7 @@ class StereoFrontEnd:
         if c.subpixel and len(il):
             # the row search's integer disparity is already the best one: refine around it only (the descriptor
             # matches of coarse ORB levels can be a few pixels off)
-            search = c.subpixel_search_px if self.detects_right else min(c.subpixel_search_px, 2)
+            search = c.subpixel_search_px if c.detects_right else min(c.subpixel_search_px, 2)
             disp, refined = refine_disparity(left.image, right.image, uvl, disp, radius=c.subpixel_radius_px,
                                              search=search)
             uvr = np.stack([uvl[:, 0] - disp, uvr[:, 1]], axis=1).astype(np.float32)

@@ -409,15 +409,14 @@ def _kabsch_batch(P: NDArray[np.float64], Q: NDArray[np.float64]) -> NDArray[np.
 
 
 @numba.njit(cache=True, nogil=True)
-def _grid_pairs(a: NDArray[np.float64], b: NDArray[np.float64], radius: float, count_only: bool,
-                out_a: NDArray[np.int64], out_b: NDArray[np.int64]) -> int:
-    """Pairs (i, j) with |a[i] − b[j]| ≤ radius: ``b`` (finite) bucketed in square cells of side ≥ ``radius`` (at
-    most ~1000 per axis), each ``a`` checked against the 3×3 cells around it. Counts them (``count_only``) or writes
-    them to ``out_a``, ``out_b``."""
+def _grid(b: NDArray[np.float64], radius: float
+          ) -> tuple[float, float, float, int, int, NDArray[np.int64], NDArray[np.int64]]:
+    """``b`` (finite) bucketed in square cells of side ≥ ``radius`` (at most ~1000 per axis): origin, side, cells
+    per axis, the point indices ordered by cell and each cell's start in that order (CSR)."""
     x0, y0 = b[:, 0].min(), b[:, 1].min()
-    side = max(radius, (b[:, 0].max() - x0) / 1000.0, (b[:, 1].max() - y0) / 1000.0)
-    nx = int((b[:, 0].max() - x0) / side) + 1
-    ny = int((b[:, 1].max() - y0) / side) + 1
+    wx, wy = b[:, 0].max() - x0, b[:, 1].max() - y0
+    side = max(radius, wx / 1000.0, wy / 1000.0)
+    nx, ny = int(wx / side) + 1, int(wy / side) + 1
     cell = np.empty(b.shape[0], np.int64)
     for j in range(b.shape[0]):
         cell[j] = int((b[j, 1] - y0) / side) * nx + int((b[j, 0] - x0) / side)
@@ -427,6 +426,15 @@ def _grid_pairs(a: NDArray[np.float64], b: NDArray[np.float64], radius: float, c
         start[cell[j] + 1] += 1
     for c in range(nx * ny):
         start[c + 1] += start[c]
+    return x0, y0, side, nx, ny, order, start
+
+
+@numba.njit(cache=True, nogil=True)
+def _grid_pairs(a: NDArray[np.float64], b: NDArray[np.float64], radius: float, x0: float, y0: float, side: float,
+                nx: int, ny: int, order: NDArray[np.int64], start: NDArray[np.int64], count_only: bool,
+                out_a: NDArray[np.int64], out_b: NDArray[np.int64]) -> int:
+    """Pairs (i, j) with |a[i] − b[j]| ≤ radius, each ``a`` checked against the 3×3 cells of :func:`_grid` (of
+    ``b``) around it. Counts them (``count_only``) or writes them to ``out_a``, ``out_b``."""
     r2 = radius * radius
     n = 0
     for i in range(a.shape[0]):
@@ -455,10 +463,11 @@ def radius_pairs(a: NDArray[np.float64], b: NDArray[np.float64], radius: float
     b = np.ascontiguousarray(b, np.float64)
     if len(a) == 0 or len(b) == 0 or not radius > 0.0:
         return np.zeros(0, np.intp), np.zeros(0, np.intp)
+    grid = _grid(b, radius)  # built once: counted, then written
     none = np.zeros(0, np.int64)
-    n = _grid_pairs(a, b, radius, True, none, none)
+    n = _grid_pairs(a, b, radius, *grid, True, none, none)
     ia, ib = np.empty(n, np.int64), np.empty(n, np.int64)
-    _grid_pairs(a, b, radius, False, ia, ib)
+    _grid_pairs(a, b, radius, *grid, False, ia, ib)
     return ia.astype(np.intp), ib.astype(np.intp)
 
 
