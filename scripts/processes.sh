@@ -1,13 +1,14 @@
 # Process handling shared by the demo scripts (sourced, not run). Every background process a demo starts goes into
 # `pids`; on exit, normal or Ctrl-C, all of them get SIGINT (ROS nodes shut down cleanly on it), those left after
 # 10 s SIGTERM (a process still starting up may not listen to SIGINT yet: `cmd &` in a script starts it with SIGINT
-# ignored until rclpy or the lightfast CLI installs a handler), those left 10 s later SIGKILL, so that no process
-# outlives its demo.
+# ignored until rclpy or the lightfast CLI installs a handler), those left 10 s later SIGKILL, and the script waits
+# until they are gone, so that no process outlives its demo.
 pids=()
-alive() {  # alive PID...: whether any of them still runs
-  local pid
-  for pid in "$@"; do kill -0 "$pid" 2>/dev/null && return 0; done
-  return 1
+running() {  # running PID...: those of them still running as background jobs of this shell. Bash's job table, not
+  local pid live  # `kill -0`: pids are reused (pid_max is 32768 here), and a reused one is not ours to signal
+  live=" $(jobs -rp | tr '\n' ' ') "
+  for pid in "$@"; do [[ $live == *" $pid "* ]] && echo "$pid"; done
+  return 0
 }
 stop() {  # stop PID: SIGINT, then wait up to 20 s, then SIGKILL
   local pid=$1
@@ -15,12 +16,14 @@ stop() {  # stop PID: SIGINT, then wait up to 20 s, then SIGKILL
   timeout 20 tail --pid="$pid" -f /dev/null 2>/dev/null || kill -KILL "$pid" 2>/dev/null || true
 }
 cleanup() {
-  local sig pid
-  for sig in INT TERM; do
-    for pid in "${pids[@]}"; do kill "-$sig" "$pid" 2>/dev/null || true; done
-    for _ in $(seq 100); do alive "${pids[@]}" || return 0; sleep 0.1; done
+  local sig left
+  for sig in INT TERM KILL; do
+    left=$(running "${pids[@]}")
+    [[ -z $left ]] && return 0
+    [[ $sig == INT ]] || echo "still running, sending SIG$sig:" $left >&2
+    kill "-$sig" $left 2>/dev/null || true
+    for _ in $(seq 100); do [[ -z $(running "${pids[@]}") ]] && return 0; sleep 0.1; done
   done
-  for pid in "${pids[@]}"; do kill -KILL "$pid" 2>/dev/null || true; done
 }
 trap cleanup EXIT
 trap 'echo "interrupted"; exit 130' INT TERM
