@@ -12,6 +12,7 @@ from collections.abc import Callable
 from typing import Any, Generic, TypeVar
 
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
+from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
@@ -63,16 +64,29 @@ def declare_config(node: Node, cls: type[C]) -> C:
     values = {}
     for spec in field_specs(cls):
         default = list(spec.default) if spec.is_tuple else spec.default
-        if spec.is_tuple and not default:
-            # an empty list carries no type: declare the type explicitly
-            param = node.declare_parameter(spec.name, _ARRAY_TYPES[spec.scalar_type], _descriptor(spec))
-        else:
-            param = node.declare_parameter(spec.name, default, _descriptor(spec))
+        try:
+            if spec.is_tuple and not default:
+                # an empty list carries no type: declare the type explicitly
+                param = node.declare_parameter(spec.name, _ARRAY_TYPES[spec.scalar_type], _descriptor(spec))
+            else:
+                param = node.declare_parameter(spec.name, default, _descriptor(spec))
+        except InvalidParameterTypeException as exc:  # e.g. `-p period_s:=60` for a double: rclpy's traceback
+            raise ConfigError(_type_message(node, spec, exc)) from None
+        except InvalidParameterValueException as exc:  # outside the descriptor's range
+            raise ConfigError(f"node {node.get_name()}: invalid parameter {spec.name}: {exc}") from None
         values[spec.name] = _from_ros(spec, param.value)
     try:
         return config_from_mapping(cls, values)
     except ConfigError as exc:
         raise ConfigError(f"node {node.get_name()}: invalid parameter: {exc}") from None
+
+
+def _type_message(node: Node, spec: FieldSpec, exc: InvalidParameterTypeException) -> str:
+    expected = _ARRAY_TYPES[spec.scalar_type] if spec.is_tuple else _SCALAR_TYPES[spec.scalar_type]
+    message = f"node {node.get_name()}: parameter {spec.name} must be of type {expected.name.lower()} ({exc.args[0]})"
+    if expected in (Parameter.Type.DOUBLE, Parameter.Type.DOUBLE_ARRAY) and "INTEGER" in str(exc.args[0]):
+        message += "; write a double with a decimal point, e.g. 60.0 instead of 60"
+    return message
 
 
 class ConfigParameters(Generic[C]):

@@ -40,6 +40,20 @@ def test_overrides_are_validated(make_node) -> None:
         declare_config(bad, DemoConfig)
 
 
+def test_a_wrong_type_or_range_on_the_command_line_is_a_config_error(make_node) -> None:
+    """`--ros-args -p gain:=1` gives an integer: rclpy raises its own exception, which run_node would show as a
+    traceback; declare_config turns it into a ConfigError naming the parameter (one line, exit code 1)."""
+    node = make_node("params_int", parameter_overrides=[Parameter("gain", value=1)])
+    with pytest.raises(ConfigError, match=r"params_int: parameter gain must be of type double .*decimal point"):
+        declare_config(node, DemoConfig)
+    node = make_node("params_str", parameter_overrides=[Parameter("chunk_size", value="ten")])
+    with pytest.raises(ConfigError, match=r"params_str: parameter chunk_size must be of type integer"):
+        declare_config(node, DemoConfig)
+    node = make_node("params_range", parameter_overrides=[Parameter("gain", value=2.0)])
+    with pytest.raises(ConfigError, match=r"params_range: invalid parameter gain: .*out of range"):
+        declare_config(node, DemoConfig)
+
+
 def test_runtime_changes_are_checked_by_the_dataclass(make_node) -> None:
     node = make_node("params_live")
     seen: list[DemoConfig] = []
