@@ -29,6 +29,7 @@ Usage: ``.venv/bin/python benchmarks/tracking_7scenes.py [--first 0] [--last 299
 from __future__ import annotations
 
 import argparse
+import functools
 import math
 import platform
 import time
@@ -48,6 +49,10 @@ from lightfast.tracking import TrackingConfig, ate_rmse, track_sequence
 
 DATA = Path("/work/shared/data/7scenes_redkitchen_300")
 Frames = list[tuple[NDArray[np.uint8], NDArray[np.float64]]]
+#: lightfast with the depth-difference geometric term (Kerl et al.; Open3D's form) at the weight ratio of Open3D's
+#: legacy defaults, lambda_dep / lambda_img = 0.968 / 0.032 ~ 30 (not tuned here).
+DEPTH_DIFF = "lightfast E_C + 30 E_G, depth-difference E_G"
+DEPTH_DIFF_CFG = functools.partial(TrackingConfig, geometric_term="depth-difference", geometric_weight=30.0)
 
 
 def _o3d_track(frames: Frames, cam: PinholeCamera, *, w_G: float | None, constant_velocity: bool = True
@@ -139,6 +144,19 @@ def _windowed_ate_cm(poses: NDArray[np.float64], gt: NDArray[np.float64], window
     return 100.0 * float(np.mean([ate_rmse(poses[s:s + window], gt[s:s + window]) for s in starts]))
 
 
+def _orderings(n: int) -> dict[str, list[int]]:
+    """Twelve sequences made of the same frames: forward and reversed, every frame and every 2nd / 3rd frame from
+    each possible start (15 / 10 Hz). Chained odometry's whole-sequence ATE depends on how one run's small errors
+    add up; over these orderings a tracker's typical value shows, not one draw."""
+    out = {}
+    for stride in (1, 2, 3):
+        for start in range(stride):
+            idx = list(range(start, n, stride))
+            out[f"{stride}/{start}"] = idx
+            out[f"{stride}/{start} rev"] = idx[::-1]
+    return out
+
+
 def _resize(frames: Frames, cam: PinholeCamera) -> tuple[Frames, PinholeCamera]:
     """320×240 input for Open3D (lightfast downsamples internally with ``resolution_scale``)."""
     small = cam.scaled(0.5)
@@ -159,6 +177,8 @@ def main() -> int:
     ap.add_argument("--repeats", type=int, default=3,
                     help="runs of the headline rows (Open3D tensor and lightfast Eq. 7, raw frames) for the "
                     "repeatability table")
+    ap.add_argument("--orderings", action=argparse.BooleanOptionalAction, default=True,
+                    help="also track twelve orderings of the same frames (forward / reversed, strides 1-3; ~15 min)")
     ap.add_argument("--output", type=Path, default=Path(__file__).parent / "results" / "tracking_7scenes.md")
     args = ap.parse_args()
     ds = SevenScenes(DATA)
@@ -188,6 +208,8 @@ def main() -> int:
             lambda: _lf_track(frames, cam, TrackingConfig(resolution_scale=0.5, mode="depth-only")),
         ),
         ("lightfast Eq. 7 (E_C + 10 E_G)", "640×480", lambda: _lf_track(frames, cam, TrackingConfig())),
+        (DEPTH_DIFF, "320×240", lambda: _lf_track(frames, cam, DEPTH_DIFF_CFG(resolution_scale=0.5))),
+        (DEPTH_DIFF, "640×480", lambda: _lf_track(frames, cam, DEPTH_DIFF_CFG())),
         # the protocol of the earlier runs: every alignment started at identity
         ("Open3D hybrid (defaults), identity start", "640×480",
          lambda: _o3d_track(frames, cam, w_G=None, constant_velocity=False)),
@@ -229,6 +251,44 @@ def main() -> int:
             ates[(name, res)].append(100.0 * ate_rmse(fn()[0], gt))
             print(f"{name:45s} {res:8s} ATE, repeated: {ates[(name, res)][-1]:6.2f} cm", flush=True)
 
+    # the same comparison over twelve orderings of the frames (the first is the table above's sequence)
+    order_rows: list[tuple[str, str, list[float]]] = []
+    if args.orderings:
+        orders = _orderings(len(frames))
+        trackers: list[tuple[str, str, Callable[[list[int]], NDArray[np.float64]]]] = [
+            ("Open3D hybrid (defaults)", "640×480", lambda ix: _o3d_track([frames[i] for i in ix], cam, w_G=None)[0]),
+            ("Open3D hybrid (defaults)", "320×240",
+             lambda ix: _o3d_track([small_frames[i] for i in ix], small_cam, w_G=None)[0]),
+            ("Open3D legacy hybrid (defaults)", "640×480",
+             lambda ix: _o3d_legacy_track([frames[i] for i in ix], cam)[0]),
+            ("Open3D legacy hybrid (defaults)", "320×240",
+             lambda ix: _o3d_legacy_track([small_frames[i] for i in ix], small_cam)[0]),
+            ("lightfast Eq. 7 (E_C + 10 E_G)", "640×480",
+             lambda ix: _lf_track([frames[i] for i in ix], cam, TrackingConfig())[0]),
+            ("lightfast Eq. 7 (E_C + 10 E_G)", "320×240",
+             lambda ix: _lf_track([frames[i] for i in ix], cam, TrackingConfig(resolution_scale=0.5))[0]),
+            (DEPTH_DIFF, "640×480", lambda ix: _lf_track([frames[i] for i in ix], cam, DEPTH_DIFF_CFG())[0]),
+            (DEPTH_DIFF, "320×240",
+             lambda ix: _lf_track([frames[i] for i in ix], cam, DEPTH_DIFF_CFG(resolution_scale=0.5))[0]),
+        ]
+        for name, res, fn in trackers:
+            values = [100.0 * ate_rmse(fn(ix), gt[ix]) for ix in orders.values()]
+            order_rows.append((name, res, values))
+            print(f"{name:45s} {res:8s} ATE over {len(values)} orderings: mean {np.mean(values):5.2f}, "
+                  f"median {np.median(values):5.2f} cm", flush=True)
+    order_lines = [
+        "",
+        f"Orderings: the same frames as {len(order_rows[0][2])} sequences, whole-sequence ATE RMSE [cm] of each. "
+        "Column `k/s`: every k-th frame from frame s (k = 1: 30 Hz, 2: 15 Hz, 3: 10 Hz), `rev`: the same frames "
+        "reversed. The first column is the sequence of the tables above (Open3D tensor runs again, so it may differ "
+        "from them in the second decimal).",
+        "",
+        "| method | resolution | " + " | ".join(_orderings(len(frames))) + " | mean | median |",
+        "|---|---|" + "---:|" * (len(order_rows[0][2]) + 2),
+        *[f"| {n} | {r} | " + " | ".join(f"{a:.2f}" for a in v) + f" | **{np.mean(v):.2f}** | {np.median(v):.2f} |"
+          for n, r, v in order_rows],
+    ] if order_rows else []
+
     lines = [
         "# Frame-to-frame RGB-D tracking on 7-Scenes (paper §III-D, Eq. 7)",
         "",
@@ -256,6 +316,7 @@ def main() -> int:
         "| method | resolution | ATE RMSE of each run [cm] |",
         "|---|---|---|",
         *[f"| {n} | {r} | {', '.join(f'{a:.2f}' for a in ates[(n, r)])} |" for n, r, _ in headline],
+        *order_lines,
         "",
         f"Generated {datetime.now(UTC).isoformat(timespec='seconds')} by `benchmarks/tracking_7scenes.py` "
         f"(Python {platform.python_version()}, NumPy {np.__version__}, Open3D {o3d.__version__}, "

@@ -14,6 +14,7 @@ from lightfast.geometry import compose, inverse, rotation_angle_deg, se3_exp
 from lightfast.tracking import TrackingConfig, TrackingError, align, ate_rmse, track_sequence
 from lightfast.tracking.metrics import MetricsError
 from lightfast.tracking.pipeline import TrackerConfig
+from lightfast.tracking.rgbd_odometry import GEOMETRIC_TERMS
 
 DATA = Path("/work/shared/data/7scenes_redkitchen_300")
 needs_data = pytest.mark.skipif(not DATA.is_dir(), reason="7-Scenes sample data not available")
@@ -70,10 +71,12 @@ def test_synthetic_known_motion_is_recovered(scenes):
     T_tgt_src = se3_exp([0.02, -0.01, 0.015, 0.01, -0.015, 0.005])  # 2.7 cm, ~1.1°
     rgb_s, depth_s = _render(f.rgb, depth, scenes.camera, inverse(T_tgt_src))
     for use_color in (True, False):
-        res = align(rgb_s, depth_s, f.rgb, depth, scenes.camera, config=FAST, use_color=use_color)
-        dt, dr = _errors(res.T_target_source, T_tgt_src)
-        assert res.converged
-        assert dt < 0.002 and dr < 0.1, (use_color, dt, dr)
+        for term in GEOMETRIC_TERMS:
+            cfg = dataclasses.replace(FAST, geometric_term=term)
+            res = align(rgb_s, depth_s, f.rgb, depth, scenes.camera, config=cfg, use_color=use_color)
+            dt, dr = _errors(res.T_target_source, T_tgt_src)
+            assert res.converged
+            assert dt < 0.002 and dr < 0.1, (use_color, term, dt, dr)
 
 
 @needs_data
@@ -178,7 +181,8 @@ def test_ate_rmse_is_invariant_to_rigid_alignment():
 
 def _reference_terms(src, tgt, T, cfg, use_color, use_depth):
     """Eq. 7 normal equations written out with NumPy (independent of the fused kernel): nearest-pixel
-    association with the occlusion test, bilinear intensity/gradient, point-to-plane, Huber IRLS weights."""
+    association with the occlusion test, bilinear intensity/gradient, point-to-plane or depth difference (with
+    the target depth's Sobel gradient at the associated pixel), Huber IRLS weights."""
     cam = tgt.camera
     q = src.points.astype(np.float64) @ T[:3, :3].T + T[:3, 3]
     z = q[:, 2]
@@ -188,8 +192,10 @@ def _reference_terms(src, tgt, T, cfg, use_color, use_depth):
     iu, iv = np.floor(u[keep] + 0.5).astype(int), np.floor(v[keep] + 0.5).astype(int)
     geo = tgt.geometry[iv, iu].astype(np.float64)
     ok = (geo[:, 0] > 0) & (np.abs(geo[:, 0] - z[keep]) <= cfg.depth_outlier_trunc_m)
+    depth_difference = cfg.geometric_term == "depth-difference"
+    dgrad = tgt.depth_grad[iv, iu].astype(np.float64) if depth_difference else None
     if use_depth:
-        ok &= np.isfinite(geo[:, 4])
+        ok &= np.isfinite(dgrad[:, 0] if depth_difference else geo[:, 4])
     idx = np.flatnonzero(keep)[ok]
     q, u, v, geo = q[idx], u[idx], v[idx], geo[ok]
     H, b = np.zeros((6, 6)), np.zeros(6)
@@ -209,7 +215,13 @@ def _reference_terms(src, tgt, T, cfg, use_color, use_depth):
         grad = np.stack([s[:, 1] * cam.fx / q[:, 2], s[:, 2] * cam.fy / q[:, 2], np.zeros(len(q))], axis=1)
         grad[:, 2] = -(grad[:, 0] * q[:, 0] + grad[:, 1] * q[:, 1]) / q[:, 2]
         add(np.concatenate([grad, np.cross(q, grad)], axis=1), r, cfg.intensity_huber_delta, 1.0)
-    if use_depth:
+    if use_depth and depth_difference:
+        dg = dgrad[ok]
+        J = np.stack([dg[:, 0] * cam.fx / q[:, 2], dg[:, 1] * cam.fy / q[:, 2], np.zeros(len(q))], axis=1)
+        J[:, 2] = -(J[:, 0] * q[:, 0] + J[:, 1] * q[:, 1]) / q[:, 2] - 1.0
+        r = geo[:, 0] - q[:, 2]
+        add(np.concatenate([J, np.cross(q, J)], axis=1), r, cfg.geometric_huber_delta_m, cfg.geometric_weight)
+    elif use_depth:
         n = geo[:, 4:7]
         r = np.einsum("ij,ij->i", n, q - geo[:, 1:4])
         add(np.concatenate([n, np.cross(q, n)], axis=1), r, cfg.geometric_huber_delta_m, cfg.geometric_weight)
@@ -217,8 +229,9 @@ def _reference_terms(src, tgt, T, cfg, use_color, use_depth):
 
 
 @needs_data
+@pytest.mark.parametrize("term", GEOMETRIC_TERMS)
 @pytest.mark.parametrize("use_color,use_depth", [(True, True), (True, False), (False, True)])
-def test_fused_kernel_matches_numpy_normal_equations(scenes, use_color, use_depth):
+def test_fused_kernel_matches_numpy_normal_equations(scenes, use_color, use_depth, term):
     from lightfast.tracking import prepare_frame
     from lightfast.tracking.rgbd_odometry import _linearize
 
@@ -226,12 +239,32 @@ def test_fused_kernel_matches_numpy_normal_equations(scenes, use_color, use_dept
     src = prepare_frame(b.rgb, b.depth_mm / 1000.0, scenes.camera, config=FAST)
     tgt = prepare_frame(a.rgb, a.depth_mm / 1000.0, scenes.camera, config=FAST)
     T = se3_exp([0.01, -0.005, 0.008, 0.004, -0.006, 0.003])
+    cfg = dataclasses.replace(FAST, geometric_term=term)
     for level in range(FAST.pyramid_levels):
-        terms = _linearize(src.levels[level], tgt.levels[level], T, FAST, use_color, use_depth)
-        H, g, count = _reference_terms(src.levels[level], tgt.levels[level], T, FAST, use_color, use_depth)
+        terms = _linearize(src.levels[level], tgt.levels[level], T, cfg, use_color, use_depth)
+        H, g, count = _reference_terms(src.levels[level], tgt.levels[level], T, cfg, use_color, use_depth)
         assert abs(terms.count - count) <= max(2, count // 2000)  # float32 vs float64 at the borders
         np.testing.assert_allclose(terms.H, H, rtol=2e-3, atol=1e-6 * np.abs(H).max())
         np.testing.assert_allclose(terms.b, g, rtol=5e-3, atol=2e-3 * np.abs(g).max())
+
+
+def test_depth_gradient_of_a_slanted_plane_and_its_invalid_pixels():
+    """The depth-difference term's target gradient: exact on a plane (Sobel of a linear ramp), NaN next to missing
+    depth and across a step larger than the discontinuity threshold."""
+    from lightfast.tracking import prepare_frame
+
+    cam = PinholeCamera(64, 48, 60.0, 60.0, 31.5, 23.5)
+    v, u = np.mgrid[0:48, 0:64].astype(np.float64)
+    depth = 1.5 + 0.004 * u - 0.002 * v
+    depth[10, 20] = 0.0  # a hole
+    depth[:, 40:] += 0.3  # a step
+    rgb = np.zeros((48, 64, 3), np.uint8)
+    grad = prepare_frame(rgb, depth, cam, config=TrackingConfig(pyramid_levels=1, iterations=(5,))).levels[0].depth_grad
+    ok = np.isfinite(grad[..., 0])
+    np.testing.assert_allclose(grad[ok], np.broadcast_to([0.004, -0.002], grad[ok].shape), atol=1e-5)
+    assert not ok[9:12, 19:22].any() and ok[13, 23]  # the hole's 3x3 neighbourhood
+    assert not ok[:, 39:41].any() and ok[5:-5, 36:39].all() and ok[5:-5, 42:60].all()  # the step, not beside it
+    assert not ok[0].any() and not ok[:, -1].any()  # image border: no full neighbourhood
 
 
 @needs_data
