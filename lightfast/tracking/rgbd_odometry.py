@@ -374,14 +374,29 @@ def _geometry_map(depth: NDArray[np.float32], fx: float, fy: float, cx: float, c
     return out
 
 
+@numba.njit(cache=True, nogil=True)
 def _depth_gradient(depth: NDArray[np.float32], discontinuity_m: float) -> NDArray[np.float32]:
-    gu = cv2.Sobel(depth, cv2.CV_32F, 1, 0, ksize=3, borderType=cv2.BORDER_REPLICATE) * np.float32(0.125)
-    gv = cv2.Sobel(depth, cv2.CV_32F, 0, 1, ksize=3, borderType=cv2.BORDER_REPLICATE) * np.float32(0.125)
-    full = cv2.erode((depth > 0).astype(np.uint8), np.ones((3, 3), np.uint8), borderType=cv2.BORDER_CONSTANT,
-                     borderValue=0).astype(bool)
-    ok = full & (np.abs(gu) <= discontinuity_m) & (np.abs(gv) <= discontinuity_m)
-    return np.ascontiguousarray(np.stack([np.where(ok, gu, np.nan), np.where(ok, gv, np.nan)], axis=-1),
-                                dtype=np.float32)
+    """(H, W, 2): Sobel dD/du, dD/dv (÷8, m/px) where the whole 3×3 neighbourhood has depth and neither derivative
+    exceeds ``discontinuity_m``; NaN elsewhere (and on the image border)."""
+    h, w = depth.shape
+    out = np.full((h, w, 2), np.nan, dtype=np.float32)
+    for i in range(1, h - 1):
+        for j in range(1, w - 1):
+            full = True
+            for di in range(-1, 2):
+                for dj in range(-1, 2):
+                    if not (depth[i + di, j + dj] > 0.0):
+                        full = False
+            if not full:
+                continue
+            gu = 0.125 * ((depth[i - 1, j + 1] - depth[i - 1, j - 1]) + 2.0 * (depth[i, j + 1] - depth[i, j - 1])
+                          + (depth[i + 1, j + 1] - depth[i + 1, j - 1]))
+            gv = 0.125 * ((depth[i + 1, j - 1] - depth[i - 1, j - 1]) + 2.0 * (depth[i + 1, j] - depth[i - 1, j])
+                          + (depth[i + 1, j + 1] - depth[i - 1, j + 1]))
+            if abs(gu) <= discontinuity_m and abs(gv) <= discontinuity_m:
+                out[i, j, 0] = gu
+                out[i, j, 1] = gv
+    return out
 
 
 def _prepare(rgb: ArrayLike, depth_m: ArrayLike, camera: PinholeCamera, cfg: TrackingConfig, role: str) -> RGBDFrame:
