@@ -44,9 +44,10 @@ def test_node_follows_bag_clock(tmp_path: Path, tiny_lighting_map: Path, domain_
     with bounded_process(cmd, timeout_s=120, env=env) as proc:
         assert spin_until(executor, lambda: node.count_publishers("/radiosity/sun_chunk") == 1, timeout_s=60)
         assert not chunks  # no /clock yet: the node waits
-        play = run_bounded([*LIGHTFAST, "bag", "play", str(tick_bag(tmp_path / "ticks")), "--clock", "100"],
-                           timeout_s=60, env=env)
+        bag = tick_bag(tmp_path / "ticks", seconds=10.0)
+        play = run_bounded([*LIGHTFAST, "bag", "play", str(bag), "--clock", "100"], timeout_s=60, env=env)
         assert play.returncode == 0, play.stderr
+        # 10 s of bag time: under a loaded CI machine the first epoch took more than 4 s to compute (one chunk came)
         spin_until(executor, lambda: False, timeout_s=0.5)  # let the last chunks arrive
         proc.terminate()
         proc.communicate(timeout=30)
