@@ -40,10 +40,11 @@ from lightfast.daylight.lighting_map import LightingMap
 from lightfast.daylight.relight import DaylightRelighter, Reference, RelightConfig
 from lightfast.daylight.sun_update import SunEpochAssembler
 from lightfast.errors import LightfastError
+from lightfast.ros.clock import on_time_jump_back
 from lightfast.ros.convert import (
     CameraInfoReader,
     ConversionError,
-    image_to_numpy,
+    image_to_rgb,
     make_header,
     numpy_to_image,
     pointcloud2_to_numpy,
@@ -52,16 +53,16 @@ from lightfast.ros.convert import (
 )
 from lightfast.ros.diagnostics import Level, ProblemLog, diagnostic_array, diagnostic_status, log_at
 from lightfast.ros.params import ConfigParameters
-from lightfast.ros.qos import SENSOR_QOS
+from lightfast.ros.qos import OUTPUT_QOS, sensor_qos
 from lightfast.ros.ready import announce_ready
 from lightfast.ros.runtime import run_node
 from lightfast.ros.sync import ExactTimePairs
 from lightfast.ros.worker import StepWorker
+from lightfast.stamps import StampGuard, StampVerdict
 from lightfast.topics import (
     COARSE_POSE_TOPIC,
     COLOR_INFO_TOPIC,
     COLOR_TOPIC,
-    MAP_FRAME,
     REFERENCE_COLOR_TOPIC,
     REFERENCE_DEPTH_TOPIC,
     RELIGHT_STATUS_TOPIC,
@@ -125,24 +126,30 @@ class DaylightRelightNode(Node):
         self._new_config: RelightConfig | None = None
         self.params.on_change = self._on_config
         self.stats = {"frames_in": 0, "poses_in": 0, "references": 0, "dropped_behind": 0, "dropped_unpaired": 0,
-                      "waiting_for_sun": 0, "bad_inputs": 0, "chunks": 0}
+                      "waiting_for_sun": 0, "bad_inputs": 0, "chunks": 0, "dropped_epochs": 0, "time_jumps": 0}
+        self._guard = StampGuard(cfg)  # stamps of the paired frames (worker only)
+        self._clock_jump: int | None = None  # the node clock after it jumped back, until the worker sees it
+        self._dropped_epochs: set[int] = set()  # sun epochs already reported as dropped (one line each)
         self._last: dict[str, Any] = {}
         self._status = (Level.WARN, "waiting for the first complete sun epoch")
 
-        self.color_pub = self.create_publisher(Image, REFERENCE_COLOR_TOPIC, SENSOR_QOS)
-        self.depth_pub = self.create_publisher(Image, REFERENCE_DEPTH_TOPIC, SENSOR_QOS)
-        self.scale_pubs = {name: self.create_publisher(Vector3Stamped, SCALE_TOPIC_PREFIX + name, SENSOR_QOS)
+        self.color_pub = self.create_publisher(Image, REFERENCE_COLOR_TOPIC, OUTPUT_QOS)
+        self.depth_pub = self.create_publisher(Image, REFERENCE_DEPTH_TOPIC, OUTPUT_QOS)
+        self.scale_pubs = {name: self.create_publisher(Vector3Stamped, SCALE_TOPIC_PREFIX + name, OUTPUT_QOS)
                            for name in self.relighter.names}
-        self.status_pub = self.create_publisher(DiagnosticArray, RELIGHT_STATUS_TOPIC, SENSOR_QOS)
-        self.create_subscription(Image, COLOR_TOPIC, self._on_image, SENSOR_QOS)
-        self.create_subscription(CameraInfo, COLOR_INFO_TOPIC, self._on_camera_info, SENSOR_QOS)
-        self.create_subscription(PoseStamped, COARSE_POSE_TOPIC, self._on_pose, SENSOR_QOS)
+        self.status_pub = self.create_publisher(DiagnosticArray, RELIGHT_STATUS_TOPIC, OUTPUT_QOS)
+        sensor = sensor_qos(cfg)
+        self.create_subscription(Image, COLOR_TOPIC, self._on_image, sensor)
+        self.create_subscription(CameraInfo, COLOR_INFO_TOPIC, self._on_camera_info, sensor)
+        self.create_subscription(PoseStamped, COARSE_POSE_TOPIC, self._on_pose, OUTPUT_QOS)
         self.create_subscription(PointCloud2, SUN_CHUNK_TOPIC, self._on_chunk, CHUNK_QOS)
+        self._jump_handle = on_time_jump_back(self, cfg.time_jump_back_s, self._on_clock_jump)
         self.status_timer = self.create_timer(STATUS_PERIOD_S, self._heartbeat)
         self._worker = StepWorker("relight", self._work_once, self._on_step_error)
         self.get_logger().info(
             f"lighting map {cfg.lighting_map}: {lmap.num_vertices} vertices; camera response {cfg.crf_file}; "
-            f"reference {cfg.reference}, method {cfg.method}; waiting for the first complete sun epoch"
+            f"reference {cfg.reference}, method {cfg.method}, sensor QoS {cfg.sensor_reliability}; waiting for the "
+            "first complete sun epoch"
         )
         self._ready_pub = announce_ready(self)  # for `lightfast wait-ready` in launch-free scripts
 
@@ -193,9 +200,7 @@ class DaylightRelightNode(Node):
     def _on_image(self, msg: Image) -> None:
         try:
             stamp = stamp_to_ns(msg.header.stamp)
-            if msg.encoding != "rgb8":
-                raise ConversionError(f"colour image encoding {msg.encoding!r} is not supported (need rgb8)")
-            rgb = image_to_numpy(msg)
+            rgb = image_to_rgb(msg)
         except ConversionError as exc:
             self._problem("image", f"dropped colour image on {COLOR_TOPIC}: {exc}")
             return
@@ -208,8 +213,8 @@ class DaylightRelightNode(Node):
     def _on_pose(self, msg: PoseStamped) -> None:
         try:
             T, stamp, frame_id = pose_stamped_to_matrix(msg)
-            if frame_id not in ("", MAP_FRAME):
-                raise ConversionError(f"frame_id {frame_id!r} is not {MAP_FRAME!r}")
+            if frame_id not in ("", self.params.config.map_frame):
+                raise ConversionError(f"frame_id {frame_id!r} is not {self.params.config.map_frame!r}")
         except ConversionError as exc:
             self._problem("pose", f"dropped coarse pose on {COARSE_POSE_TOPIC}: {exc}")
             return
@@ -252,7 +257,10 @@ class DaylightRelightNode(Node):
             if missing:
                 raise ConversionError(f"chunk lacks the field(s) {', '.join(missing)} (needs vertex, r, g, b)")
             radiosity = np.stack([points["r"], points["g"], points["b"]], axis=1)
-            complete = self.assembler.add(epoch, points["vertex"], radiosity)
+            with self._lock:  # the worker restarts the assembler when time jumps back
+                if not self._epoch_ok(epoch):
+                    return
+                complete = self.assembler.add(epoch, points["vertex"], radiosity)
         except (ConversionError, ValueError) as exc:
             self._problem("chunk", f"dropped sun chunk on {SUN_CHUNK_TOPIC}: {exc}", Level.ERROR)
             return
@@ -261,6 +269,40 @@ class DaylightRelightNode(Node):
             with self._lock:
                 self._new_sun = (complete, epoch)
             self._worker.wake()
+
+    def _epoch_ok(self, epoch: int) -> bool:
+        """(Under the input lock.) Refuse a sun epoch stamped implausibly far ahead of the clock, or older than the
+        one in use; one log line per dropped epoch."""
+        now = self._now_ns()
+        ahead_ns = round(self.params.config.max_sun_epoch_ahead_s * 1e9)
+        if ahead_ns > 0 and now > 0 and epoch - now > ahead_ns:
+            why = (f"stamped {(epoch - now) * 1e-9:.1f} s ahead of this node's clock (max_sun_epoch_ahead_s "
+                   f"{self.params.config.max_sun_epoch_ahead_s:g})")
+        else:
+            why = self.assembler.drop_reason(epoch)
+        if why is None:
+            return True
+        if epoch not in self._dropped_epochs:
+            self._dropped_epochs.add(epoch)
+            self.stats["dropped_epochs"] += 1
+            self.get_logger().warning(f"dropped sun epoch {epoch}: {why}")
+        return False
+
+    def _on_clock_jump(self, now_ns: int, jump_ns: int) -> None:
+        with self._lock:
+            self._clock_jump = now_ns
+        self._worker.wake()
+
+    def _time_jumped(self, why: str) -> None:
+        """(Worker, under the input lock.) Time went back: the scale average restarts and the next complete sun epoch is taken whatever its time
+        (the B̂_sun in use stays until then)."""
+        self.stats["time_jumps"] += 1
+        self._guard.reset()
+        self.relighter.restart_average()
+        self.assembler.restart()
+        self._dropped_epochs.clear()
+        self.get_logger().warning(f"{why} (a bag played again, or looped?): the brightness average restarts and "
+                                  "the next complete sun epoch is used whatever its time")
 
     def _on_config(self, cfg: RelightConfig) -> None:
         with self._lock:
@@ -281,9 +323,12 @@ class DaylightRelightNode(Node):
         with self._lock:
             new_sun, self._new_sun = self._new_sun, None
             new_config, self._new_config = self._new_config, None
+            clock_jump, self._clock_jump = self._clock_jump, None
             frame = self._queue.popleft() if self._queue else None
             camera = self._camera
             more = bool(self._queue)
+            if clock_jump is not None and self._guard.clock_jumped_back(clock_jump):
+                self._time_jumped(f"ROS time jumped back to {clock_jump * 1e-9:.3f} s")
         if new_config is not None:
             self.relighter.reconfigure(new_config)
         if new_sun is not None:
@@ -292,9 +337,24 @@ class DaylightRelightNode(Node):
             self.get_logger().info(f"sun epoch {new_sun[1]} complete: B̂_sun swapped in"
                                    + ("; publishing references" if first else ""))
             self._publish_status(Level.OK, f"sun epoch {new_sun[1]} swapped in")
-        if frame is not None:
+        if frame is not None and self._stamp_ok(frame.stamp_ns):
             self._process(frame, camera)
         return more
+
+    def _stamp_ok(self, stamp: int) -> bool:
+        """Refuse a frame stamped ahead of the clock; restart the time-dependent state when the stamps went back.
+        (Frames are relit independently: one slightly out of order is relit as it is.)"""
+        now = self._now_ns()
+        verdict = self._guard.check(stamp, now)
+        if verdict is StampVerdict.AHEAD:
+            self._problem("stamp", f"frame {stamp}: {self._guard.describe(verdict, stamp, now)}", stamp_ns=stamp)
+            return False
+        if verdict is StampVerdict.JUMPED_BACK:
+            with self._lock:
+                self._time_jumped(f"frame stamps went back {(self._guard.last_ns - stamp) * 1e-9:.3f} s")
+        if verdict is not StampVerdict.OUT_OF_ORDER:
+            self._guard.accept(stamp)
+        return True
 
     def _process(self, f: _Frame, camera: PinholeCamera | None) -> None:
         stamp = f.stamp_ns

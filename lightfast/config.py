@@ -192,6 +192,12 @@ def config_from_mapping(cls: type[C], values: Mapping[str, Any], *, allow_unknow
 
 
 def _yaml_scalar(value: Any) -> str:
+    """A value as YAML that rcl's parameter parser reads back with the same type: strings are always quoted (rcl
+    reads a plain ``y``, ``n``, ``on`` or ``off`` as a bool, ``1`` as an integer)."""
+    if isinstance(value, str):
+        return "'" + value.replace("'", "''") + "'"
+    if isinstance(value, list):
+        return "[" + ", ".join(_yaml_scalar(v) for v in value) + "]"
     return yaml.safe_dump(value, default_flow_style=True, width=10_000).strip().removesuffix("...").strip()
 
 

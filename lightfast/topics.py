@@ -8,6 +8,7 @@ GT_POSE_TOPIC = "/ground_truth/pose"
 SUN_DIRECTION_TOPIC = "/sun/direction"
 SUN_CHUNK_TOPIC = "/radiosity/sun_chunk"
 
+# default frame names (REP 103/105); every node takes the frames it publishes in as parameters
 OPTICAL_FRAME = "camera_color_optical_frame"
 MAP_FRAME = "map"
 
@@ -24,6 +25,7 @@ TRACKER_POSE_TOPIC = "/tracker/pose"
 TRACKER_ODOMETRY_TOPIC = "/tracker/odometry"
 TRACKER_STATUS_TOPIC = "/tracker/status"
 TRACKER_RESET_TOPIC = "/tracker/reset"
+INITIAL_POSE_TOPIC = "/initialpose"  # geometry_msgs/PoseWithCovarianceStamped, as RViz's "2D Pose Estimate" sends it
 
 # vtr_localizer_node (colour-constant stereo VT&R, paper 3 §IV): rectified stereo input, localization output
 STEREO_LEFT_IMAGE_TOPIC = "/stereo/left/image_raw"

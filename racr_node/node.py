@@ -79,7 +79,7 @@ from lightfast.ros.convert import (
 )
 from lightfast.ros.diagnostics import Level, ProblemLog, diagnostic_array, diagnostic_status, log_at
 from lightfast.ros.params import ConfigParameters
-from lightfast.ros.qos import LATCHED_QOS, SENSOR_QOS
+from lightfast.ros.qos import LATCHED_QOS, OUTPUT_QOS
 from lightfast.ros.racr_msgs import (
     keyframe_image_to_float,
     matrix_to_transform_stamped,
@@ -158,18 +158,18 @@ class RacrNode(Node):
         self._last_command: MotionCommand | None = None
         self.stats = {"bad_inputs": 0, "clouds_used": 0, "clouds_dropped": 0, "clouds_superseded": 0}
 
-        self.motion_pub = self.create_publisher(TransformStamped, RACR_HAND_MOTION_TOPIC, SENSOR_QOS)
-        self.status_pub = self.create_publisher(DiagnosticArray, RACR_STATUS_TOPIC, SENSOR_QOS)
-        self.aligned_pub = self.create_publisher(PointCloud2, RACR_ALIGNED_CLOUD_TOPIC, SENSOR_QOS)
+        self.motion_pub = self.create_publisher(TransformStamped, RACR_HAND_MOTION_TOPIC, OUTPUT_QOS)
+        self.status_pub = self.create_publisher(DiagnosticArray, RACR_STATUS_TOPIC, OUTPUT_QOS)
+        self.aligned_pub = self.create_publisher(PointCloud2, RACR_ALIGNED_CLOUD_TOPIC, OUTPUT_QOS)
         self.reference_pub = self.create_publisher(PointCloud2, RACR_REFERENCE_CLOUD_TOPIC, LATCHED_QOS)
-        self.camera_pose_pub = self.create_publisher(PoseStamped, RACR_CAMERA_POSE_TOPIC, SENSOR_QOS)
-        self.create_subscription(PointCloud2, VSE_POINTS_TOPIC, self._on_points, SENSOR_QOS)
-        self.create_subscription(PoseStamped, VSE_POSE_TOPIC, self._on_vse_pose, SENSOR_QOS)
+        self.camera_pose_pub = self.create_publisher(PoseStamped, RACR_CAMERA_POSE_TOPIC, OUTPUT_QOS)
+        self.create_subscription(PointCloud2, VSE_POINTS_TOPIC, self._on_points, OUTPUT_QOS)
+        self.create_subscription(PoseStamped, VSE_POSE_TOPIC, self._on_vse_pose, OUTPUT_QOS)
         self.create_subscription(Image, VSE_KEYFRAME_IMAGE_TOPIC, self._on_keyframe_image, KEYFRAME_QOS)
         self.create_subscription(TransformStamped, VSE_KEYFRAME_POSE_TOPIC, self._on_keyframe_pose, KEYFRAME_QOS)
-        self.create_subscription(CameraInfo, VSE_CAMERA_INFO_TOPIC, self._on_camera_info, SENSOR_QOS)
-        self.create_subscription(PoseStamped, PLATFORM_POSE_TOPIC, self._on_platform_pose, SENSOR_QOS)
-        self.create_subscription(PoseStamped, PLATFORM_STOPPED_TOPIC, self._on_platform_stopped, SENSOR_QOS)
+        self.create_subscription(CameraInfo, VSE_CAMERA_INFO_TOPIC, self._on_camera_info, OUTPUT_QOS)
+        self.create_subscription(PoseStamped, PLATFORM_POSE_TOPIC, self._on_platform_pose, OUTPUT_QOS)
+        self.create_subscription(PoseStamped, PLATFORM_STOPPED_TOPIC, self._on_platform_stopped, OUTPUT_QOS)
         self.create_timer(cfg.adjust_period_s, self._tick)
         self.create_timer(cfg.status_period_s, self._heartbeat)
         self._ready_pub = announce_ready(self)  # for `lightfast wait-ready` in launch-free scripts

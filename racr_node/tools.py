@@ -53,7 +53,7 @@ def _wait(node: Any, executor: Any, *, timeout_s: float, pids: Sequence[int]) ->
     from geometry_msgs.msg import PoseStamped
     from rclpy.executors import ExternalShutdownException
 
-    from lightfast.ros.qos import SENSOR_QOS
+    from lightfast.ros.qos import OUTPUT_QOS
 
     seen: dict[str, Any] = {"racr": {}, "platform": {}, "truth": None}
 
@@ -69,9 +69,9 @@ def _wait(node: Any, executor: Any, *, timeout_s: float, pids: Sequence[int]) ->
     def on_truth(msg: PoseStamped) -> None:
         seen["truth"] = pose_stamped_to_matrix(msg)
 
-    node.create_subscription(DiagnosticArray, RACR_STATUS_TOPIC, on_status, SENSOR_QOS)
-    node.create_subscription(DiagnosticArray, PLATFORM_STATUS_TOPIC, on_platform, SENSOR_QOS)
-    node.create_subscription(PoseStamped, SIM_CAMERA_POSE_TOPIC, on_truth, SENSOR_QOS)
+    node.create_subscription(DiagnosticArray, RACR_STATUS_TOPIC, on_status, OUTPUT_QOS)
+    node.create_subscription(DiagnosticArray, PLATFORM_STATUS_TOPIC, on_platform, OUTPUT_QOS)
+    node.create_subscription(PoseStamped, SIM_CAMERA_POSE_TOPIC, on_truth, OUTPUT_QOS)
     start = time.monotonic()
     deadline = start + timeout_s
     end: float | None = None

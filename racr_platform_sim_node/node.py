@@ -40,7 +40,7 @@ from lightfast.config import ConfigError
 from lightfast.ros.convert import ConversionError, matrix_to_pose_stamped
 from lightfast.ros.diagnostics import Level, ProblemLog, diagnostic_array, diagnostic_status, log_at
 from lightfast.ros.params import ConfigParameters
-from lightfast.ros.qos import SENSOR_QOS
+from lightfast.ros.qos import OUTPUT_QOS
 from lightfast.ros.racr_msgs import transform_stamped_to_matrix
 from lightfast.ros.runtime import run_node
 from lightfast.sim.racr_live import RacrPlatformSimConfig, TimedPlatform
@@ -76,11 +76,11 @@ class RacrPlatformSimNode(Node):
         self.bad_commands = 0  # not even a rigid transform in platform_hand
         self._truth_stamp_ns = self._now_ns()
         self._stop_timer = None
-        self.pose_pub = self.create_publisher(PoseStamped, PLATFORM_POSE_TOPIC, SENSOR_QOS)
-        self.stopped_pub = self.create_publisher(PoseStamped, PLATFORM_STOPPED_TOPIC, SENSOR_QOS)
-        self.status_pub = self.create_publisher(DiagnosticArray, PLATFORM_STATUS_TOPIC, SENSOR_QOS)
-        self.truth_pub = self.create_publisher(PoseStamped, SIM_CAMERA_POSE_TOPIC, SENSOR_QOS)
-        self.create_subscription(TransformStamped, RACR_HAND_MOTION_TOPIC, self._on_command, SENSOR_QOS)
+        self.pose_pub = self.create_publisher(PoseStamped, PLATFORM_POSE_TOPIC, OUTPUT_QOS)
+        self.stopped_pub = self.create_publisher(PoseStamped, PLATFORM_STOPPED_TOPIC, OUTPUT_QOS)
+        self.status_pub = self.create_publisher(DiagnosticArray, PLATFORM_STATUS_TOPIC, OUTPUT_QOS)
+        self.truth_pub = self.create_publisher(PoseStamped, SIM_CAMERA_POSE_TOPIC, OUTPUT_QOS)
+        self.create_subscription(TransformStamped, RACR_HAND_MOTION_TOPIC, self._on_command, OUTPUT_QOS)
         self.state_timer = self.create_timer(1.0 / cfg.state_rate_hz, self._publish_state)
         self.get_logger().info(f"platform of scene {self.scene_name} ready (time_scale {cfg.time_scale:g}); "
                                f"executing {RACR_HAND_MOTION_TOPIC}")

@@ -45,7 +45,7 @@ from lightfast.ros.convert import (
 )
 from lightfast.ros.diagnostics import Level, ProblemLog, diagnostic_array, diagnostic_status, log_at
 from lightfast.ros.params import ConfigParameters
-from lightfast.ros.qos import SENSOR_QOS
+from lightfast.ros.qos import OUTPUT_QOS
 from lightfast.ros.racr_msgs import matrix_to_transform_stamped
 from lightfast.ros.runtime import run_node
 from lightfast.sim.racr_live import RacrVseSimConfig
@@ -84,13 +84,13 @@ class RacrVseNode(Node):
         self._keyframe_id = 0
         self._last_truth_stamp: int | None = None
         self._last_messages: list[tuple[Any, Any]] = []
-        self.info_pub = self.create_publisher(CameraInfo, VSE_CAMERA_INFO_TOPIC, SENSOR_QOS)
+        self.info_pub = self.create_publisher(CameraInfo, VSE_CAMERA_INFO_TOPIC, OUTPUT_QOS)
         self.image_pub = self.create_publisher(Image, VSE_KEYFRAME_IMAGE_TOPIC, KEYFRAME_QOS)
         self.kf_pose_pub = self.create_publisher(TransformStamped, VSE_KEYFRAME_POSE_TOPIC, KEYFRAME_QOS)
-        self.pose_pub = self.create_publisher(PoseStamped, VSE_POSE_TOPIC, SENSOR_QOS)
-        self.points_pub = self.create_publisher(PointCloud2, VSE_POINTS_TOPIC, SENSOR_QOS)
-        self.status_pub = self.create_publisher(DiagnosticArray, VSE_STATUS_TOPIC, SENSOR_QOS)
-        self.create_subscription(PoseStamped, SIM_CAMERA_POSE_TOPIC, self._on_truth, SENSOR_QOS)
+        self.pose_pub = self.create_publisher(PoseStamped, VSE_POSE_TOPIC, OUTPUT_QOS)
+        self.points_pub = self.create_publisher(PointCloud2, VSE_POINTS_TOPIC, OUTPUT_QOS)
+        self.status_pub = self.create_publisher(DiagnosticArray, VSE_STATUS_TOPIC, OUTPUT_QOS)
+        self.create_subscription(PoseStamped, SIM_CAMERA_POSE_TOPIC, self._on_truth, OUTPUT_QOS)
         self.create_timer(cfg.republish_s, self._republish)
         self.get_logger().info(f"VSE stand-in for scene {self.scene_name} under the {cfg.lighting!r} lighting")
 

@@ -33,34 +33,39 @@ from typing import Any
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
-from geometry_msgs.msg import PoseStamped
+from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
 from nav_msgs.msg import Odometry
 from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, Image
 
 from lightfast.camera import PinholeCamera
+from lightfast.ros.clock import on_time_jump_back
 from lightfast.ros.convert import (
     CameraInfoReader,
     ConversionError,
     image_to_numpy,
+    image_to_rgb,
     matrix_to_odometry,
     matrix_to_pose_stamped,
     pose_stamped_to_matrix,
+    pose_with_covariance_to_matrix,
     stamp_to_ns,
 )
 from lightfast.ros.diagnostics import Level, ProblemLog, diagnostic_array, diagnostic_status, log_at
 from lightfast.ros.params import ConfigParameters
-from lightfast.ros.qos import SENSOR_QOS
+from lightfast.ros.qos import OUTPUT_QOS, sensor_qos
 from lightfast.ros.ready import announce_ready
 from lightfast.ros.runtime import run_node
 from lightfast.ros.sync import ExactTimePairs
+from lightfast.ros.tf import TransformBroadcaster, transform_stamped
 from lightfast.ros.worker import StepWorker
+from lightfast.stamps import StampGuard, StampVerdict
 from lightfast.topics import (
     COARSE_POSE_TOPIC,
     COLOR_INFO_TOPIC,
     COLOR_TOPIC,
     DEPTH_TOPIC,
-    MAP_FRAME,
+    INITIAL_POSE_TOPIC,
     OPTICAL_FRAME,
     REFERENCE_COLOR_TOPIC,
     REFERENCE_DEPTH_TOPIC,
@@ -92,9 +97,8 @@ def depth_to_metres(msg: Image) -> np.ndarray:
 
 
 def color_to_numpy(msg: Image) -> np.ndarray:
-    if msg.encoding != "rgb8":
-        raise ConversionError(f"colour image encoding {msg.encoding!r} is not supported (need rgb8)")
-    return image_to_numpy(msg)
+    """RGB (rgb8, bgr8, rgba8, bgra8) or grey (mono8): the tracker's photometric term uses intensity only."""
+    return image_to_rgb(msg, allow_mono=True)
 
 
 @dataclass
@@ -136,28 +140,37 @@ class RGBDTrackerNode(Node):
         self._ref_queue: deque[tuple[int, np.ndarray, np.ndarray]] = deque()
         self._camera: PinholeCamera | None = None
         self._read_camera_info = CameraInfoReader()
-        self._reset: tuple[np.ndarray, int | None] | None = None
+        self._reset: tuple[np.ndarray, int | None, str] | None = None
+        self._guard = StampGuard(cfg)  # stamps of the live frames (f2f worker only)
+        self._clock_jump: int | None = None  # the node clock after it jumped back, until the f2f worker sees it
+        self._announce_start = True  # log where tracking starts at the next first frame
         self._new_config: TrackerConfig | None = None
         self.params.on_change = self._on_config
         self.stats = {"frames_in": 0, "references_in": 0, "frames_tracked": 0, "f2m": 0, "f2f": 0, "dropped_behind": 0,
-                      "dropped_unpaired": 0, "late_references": 0, "superseded_references": 0, "bad_inputs": 0}
+                      "dropped_unpaired": 0, "late_references": 0, "superseded_references": 0, "bad_inputs": 0,
+                      "time_jumps": 0}
 
-        self.coarse_pub = self.create_publisher(PoseStamped, COARSE_POSE_TOPIC, SENSOR_QOS)
-        self.pose_pub = self.create_publisher(PoseStamped, TRACKER_POSE_TOPIC, SENSOR_QOS)
-        self.odom_pub = self.create_publisher(Odometry, TRACKER_ODOMETRY_TOPIC, SENSOR_QOS)
-        self.status_pub = self.create_publisher(DiagnosticArray, TRACKER_STATUS_TOPIC, SENSOR_QOS)
+        self.coarse_pub = self.create_publisher(PoseStamped, COARSE_POSE_TOPIC, OUTPUT_QOS)
+        self.pose_pub = self.create_publisher(PoseStamped, TRACKER_POSE_TOPIC, OUTPUT_QOS)
+        self.odom_pub = self.create_publisher(Odometry, TRACKER_ODOMETRY_TOPIC, OUTPUT_QOS)
+        self.status_pub = self.create_publisher(DiagnosticArray, TRACKER_STATUS_TOPIC, OUTPUT_QOS)
+        self.tf = TransformBroadcaster(self) if cfg.publish_tf else None
+        sensor = sensor_qos(cfg)
         sub = self.create_subscription
-        sub(Image, COLOR_TOPIC, self._on_color, SENSOR_QOS)
-        sub(Image, DEPTH_TOPIC, self._on_depth, SENSOR_QOS)
-        sub(CameraInfo, COLOR_INFO_TOPIC, self._on_camera_info, SENSOR_QOS)
-        sub(Image, REFERENCE_COLOR_TOPIC, self._on_ref_color, SENSOR_QOS)
-        sub(Image, REFERENCE_DEPTH_TOPIC, self._on_ref_depth, SENSOR_QOS)
-        sub(PoseStamped, TRACKER_RESET_TOPIC, self._on_reset, SENSOR_QOS)
+        sub(Image, COLOR_TOPIC, self._on_color, sensor)
+        sub(Image, DEPTH_TOPIC, self._on_depth, sensor)
+        sub(CameraInfo, COLOR_INFO_TOPIC, self._on_camera_info, sensor)
+        sub(Image, REFERENCE_COLOR_TOPIC, self._on_ref_color, OUTPUT_QOS)
+        sub(Image, REFERENCE_DEPTH_TOPIC, self._on_ref_depth, OUTPUT_QOS)
+        sub(PoseStamped, TRACKER_RESET_TOPIC, self._on_reset, OUTPUT_QOS)
+        sub(PoseWithCovarianceStamped, INITIAL_POSE_TOPIC, self._on_initial_pose, OUTPUT_QOS)
+        self._jump_handle = on_time_jump_back(self, cfg.time_jump_back_s, self._on_clock_jump)
         self._f2f_worker = StepWorker("tracker-f2f", self._work, self._on_step_error,
                                       period_s=lambda: self._deadline_period(self.config))
         self._f2m_worker = StepWorker("tracker-f2m", self._refine_work, self._on_step_error)
         self.get_logger().info(f"mode {cfg.mode}, reference timeout {cfg.reference_timeout_s} s, start pose "
-                               f"{list(cfg.initial_pose)}; kernels warmed up in {warm_s:.2f} s")
+                               f"{list(cfg.initial_pose)} in {cfg.map_frame}, sensor QoS {cfg.sensor_reliability}; "
+                               f"kernels warmed up in {warm_s:.2f} s")
         self._ready_pub = announce_ready(self)  # for `lightfast wait-ready` in launch-free scripts
 
     # ---------------------------------------------------------------------------------------------- helpers
@@ -248,15 +261,26 @@ class RGBDTrackerNode(Node):
             self._camera = camera
 
     def _on_reset(self, msg: PoseStamped) -> None:
+        self._take_reset(msg, pose_stamped_to_matrix, TRACKER_RESET_TOPIC)
+
+    def _on_initial_pose(self, msg: PoseWithCovarianceStamped) -> None:
+        self._take_reset(msg, pose_with_covariance_to_matrix, INITIAL_POSE_TOPIC)
+
+    def _take_reset(self, msg: Any, read: Any, topic: str) -> None:
         try:
-            T, stamp, frame_id = pose_stamped_to_matrix(msg)
-            if frame_id not in ("", MAP_FRAME):
-                raise ConversionError(f"frame_id {frame_id!r} is not {MAP_FRAME!r}")
+            T, stamp, frame_id = read(msg)
+            if frame_id not in ("", self.config.map_frame):
+                raise ConversionError(f"frame_id {frame_id!r} is not {self.config.map_frame!r}")
         except ConversionError as exc:
-            self._problem("reset", f"ignored reset on {TRACKER_RESET_TOPIC}: {exc}")
+            self._problem("reset", f"ignored reset on {topic}: {exc}")
             return
         with self._lock:
-            self._reset = (T, stamp or None)
+            self._reset = (T, stamp or None, topic)
+        self._f2f_worker.wake()
+
+    def _on_clock_jump(self, now_ns: int, jump_ns: int) -> None:
+        with self._lock:
+            self._clock_jump = now_ns
         self._f2f_worker.wake()
 
     def _on_config(self, cfg: TrackerConfig) -> None:
@@ -279,6 +303,7 @@ class RGBDTrackerNode(Node):
         with self._lock:
             new_config, self._new_config = self._new_config, None
             reset, self._reset = self._reset, None
+            clock_jump, self._clock_jump = self._clock_jump, None
             frame = self._frames.popleft() if self._frames else None
             camera = self._camera
             more = bool(self._frames)
@@ -287,10 +312,16 @@ class RGBDTrackerNode(Node):
                 self._apply_config(new_config)
             if camera is not None and self.tracker is not None and camera != self.tracker.camera:
                 self._restart("camera_info changed")
+            if clock_jump is not None and self._guard.clock_jumped_back(clock_jump):
+                self._time_jumped(f"ROS time jumped back to {clock_jump * 1e-9:.3f} s")
             if reset is not None:
                 self._apply_reset(*reset)
             self._finish_overdue()
+            if frame is not None and not self._stamp_ok(frame.stamp_ns):
+                frame = None
             job = self._start_track(frame, camera) if frame is not None else None
+            if job is not None:
+                self._guard.accept(job.stamp_ns)
         if job is not None:
             job.run()  # the alignment, outside the lock: f2m jobs start and finish meanwhile
             with self._state:
@@ -329,7 +360,30 @@ class RGBDTrackerNode(Node):
             self._start_pose = self._last_pose
         self.get_logger().info(f"tracking restarts at the last pose: {why}")
 
-    def _apply_reset(self, T: np.ndarray, stamp: int | None) -> None:
+    def _stamp_ok(self, stamp: int) -> bool:
+        """Check a live frame's stamp (f2f worker): refuse it, or restart tracking when time went back."""
+        now = self.get_clock().now().nanoseconds
+        verdict = self._guard.check(stamp, now)
+        if verdict is StampVerdict.JUMPED_BACK:
+            self._time_jumped(f"frame stamps went back {(self._guard.last_ns - stamp) * 1e-9:.3f} s")
+        elif verdict is not StampVerdict.OK:
+            self._problem("stamp", f"frame {stamp}: {self._guard.describe(verdict, stamp, now)}", stamp_ns=stamp)
+            return False
+        return True
+
+    def _time_jumped(self, why: str) -> None:
+        """Time went back (a bag played again or looped, a restarted simulation): the frames waiting are finished
+        with their f2f pose, and tracking starts over at ``initial_pose``, as at start-up."""
+        self.stats["time_jumps"] += 1
+        self._finish_all("f2f (time jumped back)")
+        self.tracker = None
+        self._last_pose = None
+        self._start_pose = self.config.T_map_cam_initial
+        self._guard.reset()
+        self._announce_start = True
+        self.get_logger().warning(f"{why} (a bag played again, or looped?): tracking starts over at initial_pose")
+
+    def _apply_reset(self, T: np.ndarray, stamp: int | None, topic: str) -> None:
         if self.tracker is None:
             self._start_pose = T
         else:
@@ -338,6 +392,8 @@ class RGBDTrackerNode(Node):
             for s in dropped:
                 del self._pending[s]
         self._last_pose = T
+        self._announce_start = False
+        self.get_logger().info(f"tracking reset on {topic} to {np.round(T[:3, 3], 3).tolist()} m")
         self._publish_status(Level.OK, "tracking reset", {"stamp_ns": stamp, "source": "reset", "reason": ""})
 
     def _start_track(self, f: _Frame, camera: PinholeCamera | None) -> F2FJob | None:
@@ -354,6 +410,12 @@ class RGBDTrackerNode(Node):
         if self.tracker is None:
             self.tracker = RGBDTracker(camera, config=self.config)
             self.tracker.reset(self._start_pose)
+            if self._announce_start:  # nothing says where the camera is but the parameter: say it once
+                self._announce_start = False
+                self.get_logger().warning(
+                    f"tracking starts at initial_pose {np.round(self._start_pose[:3, 3], 3).tolist()} m in "
+                    f"{self.config.map_frame}; if the camera is elsewhere, send its pose on {INITIAL_POSE_TOPIC} "
+                    f"(RViz: 2D Pose Estimate) or {TRACKER_RESET_TOPIC}")
         try:
             return self.tracker.start_coarse(stamp, f.rgb, f.depth_m)
         except TrackingError as exc:
@@ -371,10 +433,11 @@ class RGBDTrackerNode(Node):
             return
         self.stats["frames_tracked"] += 1
         self._last_pose = est.T_map_cam
-        self._pending[stamp] = _Pending(f.frame_id or OPTICAL_FRAME, f.received, f.arrival_lag_ns,
-                                        time.monotonic())
+        self._pending[stamp] = _Pending(self.config.camera_frame or f.frame_id or OPTICAL_FRAME, f.received,
+                                        f.arrival_lag_ns, time.monotonic())
         try:
-            self.coarse_pub.publish(matrix_to_pose_stamped(est.T_map_cam, stamp_ns=stamp, frame_id=MAP_FRAME))
+            self.coarse_pub.publish(matrix_to_pose_stamped(est.T_map_cam, stamp_ns=stamp,
+                                                           frame_id=self.config.map_frame))
         except ConversionError as exc:
             self._problem("publish", f"coarse pose of frame {stamp} not published: {exc}", Level.ERROR, stamp)
         for s in self.tracker.expired():
@@ -432,10 +495,14 @@ class RGBDTrackerNode(Node):
     def _publish_result(self, r: TrackResult) -> None:
         p = self._pending.pop(r.stamp_ns)
         self.stats[r.source] = self.stats.get(r.source, 0) + 1
+        map_frame = self.config.map_frame
         try:
-            self.pose_pub.publish(matrix_to_pose_stamped(r.T_map_cam, stamp_ns=r.stamp_ns, frame_id=MAP_FRAME))
-            self.odom_pub.publish(matrix_to_odometry(r.T_map_cam, stamp_ns=r.stamp_ns, frame_id=MAP_FRAME,
+            self.pose_pub.publish(matrix_to_pose_stamped(r.T_map_cam, stamp_ns=r.stamp_ns, frame_id=map_frame))
+            self.odom_pub.publish(matrix_to_odometry(r.T_map_cam, stamp_ns=r.stamp_ns, frame_id=map_frame,
                                                      child_frame_id=p.frame_id))
+            if self.tf is not None:
+                self.tf.send(transform_stamped(r.T_map_cam, stamp_ns=r.stamp_ns, parent_frame=map_frame,
+                                               child_frame=p.frame_id))
         except ConversionError as exc:
             self._problem("publish", f"pose of frame {r.stamp_ns} not published: {exc}", Level.ERROR, r.stamp_ns)
             return

@@ -21,13 +21,17 @@ from lightfast.daylight.lighting_map import LightingMap
 from lightfast.daylight.sun import Site
 from lightfast.daylight.sun_update import SunChunk, SunUpdateConfig, SunUpdatePipeline
 from lightfast.errors import LightfastError
+from lightfast.ros.clock import on_time_jump_back
 from lightfast.ros.convert import make_header, numpy_to_pointcloud2
 from lightfast.ros.params import ConfigParameters
-from lightfast.ros.qos import LATCHED_QOS, SENSOR_QOS
+from lightfast.ros.qos import LATCHED_QOS, OUTPUT_QOS
 from lightfast.ros.ready import announce_ready
 from lightfast.ros.runtime import run_node
 from lightfast.topics import SUN_CHUNK_TOPIC, SUN_DIRECTION_TOPIC
 
+#: A clock step back larger than this restarts the sun update (ROS time only goes back on sim time: a bag played
+#: again or looped); the sun moves 0.004 deg per second, so smaller steps do not matter.
+TIME_JUMP_BACK_S = 1.0
 CHUNK_DTYPE = np.dtype([("vertex", "<u4"), ("r", "<f4"), ("g", "<f4"), ("b", "<f4")])
 
 
@@ -50,9 +54,10 @@ class SunUpdateNode(Node):
         self.pipeline = SunUpdatePipeline(lmap, cfg, site=site)
         self.params.on_change = self._reconfigure
         self.direction_pub = self.create_publisher(Vector3Stamped, SUN_DIRECTION_TOPIC, LATCHED_QOS)
-        self.chunk_pub = self.create_publisher(PointCloud2, SUN_CHUNK_TOPIC, SENSOR_QOS)
+        self.chunk_pub = self.create_publisher(PointCloud2, SUN_CHUNK_TOPIC, OUTPUT_QOS)
         self.direction_timer = self.create_timer(1.0 / cfg.direction_rate_hz, self._publish_direction)
         self.step_timer = self.create_timer(cfg.step_period_s, self._step)
+        self._jump_handle = on_time_jump_back(self, TIME_JUMP_BACK_S, self._on_clock_jump)
         self.get_logger().info(
             f"lighting map {cfg.lighting_map}: {lmap.num_vertices} vertices, {lmap.patches.count} patches; "
             f"site {self.pipeline.site.latitude_deg:.4f}, {self.pipeline.site.longitude_deg:.4f}"
@@ -62,6 +67,12 @@ class SunUpdateNode(Node):
     def _now_ns(self) -> int | None:
         now = self.get_clock().now().nanoseconds
         return now if now > 0 else None  # use_sim_time before the first /clock message
+
+    def _on_clock_jump(self, now_ns: int, jump_ns: int) -> None:
+        """ROS time went back (executor thread, like the timers): start over with an update for the new time."""
+        self.pipeline.restart()
+        self.get_logger().warning(f"ROS time jumped back {-jump_ns * 1e-9:.3f} s to {now_ns * 1e-9:.3f} s (a bag "
+                                  "played again, or looped?): the running sun update is dropped, a new one starts")
 
     def _reconfigure(self, cfg: SunUpdateConfig) -> None:
         self.pipeline.config = cfg

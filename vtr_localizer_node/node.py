@@ -84,7 +84,7 @@ from lightfast.ros.convert import (
 )
 from lightfast.ros.diagnostics import Level, ProblemLog, diagnostic_array, diagnostic_status, log_at
 from lightfast.ros.params import ConfigParameters
-from lightfast.ros.qos import SENSOR_QOS
+from lightfast.ros.qos import OUTPUT_QOS
 from lightfast.ros.ready import announce_ready
 from lightfast.ros.runtime import run_node
 from lightfast.ros.sync import ExactTimePairs
@@ -205,15 +205,15 @@ class VtrLocalizerNode(Node):
 
         inputs = MutuallyExclusiveCallbackGroup()
         work = MutuallyExclusiveCallbackGroup()
-        self.localization_pub = self.create_publisher(PoseWithCovarianceStamped, VTR_LOCALIZATION_TOPIC, SENSOR_QOS)
-        self.odom_pub = self.create_publisher(Odometry, VTR_ODOMETRY_TOPIC, SENSOR_QOS)
-        self.status_pub = self.create_publisher(DiagnosticArray, VTR_STATUS_TOPIC, SENSOR_QOS)
-        self.image_pubs = {"fv": self.create_publisher(Image, VTR_FV_TOPIC, SENSOR_QOS),
-                           "fr": self.create_publisher(Image, VTR_FR_TOPIC, SENSOR_QOS)}
+        self.localization_pub = self.create_publisher(PoseWithCovarianceStamped, VTR_LOCALIZATION_TOPIC, OUTPUT_QOS)
+        self.odom_pub = self.create_publisher(Odometry, VTR_ODOMETRY_TOPIC, OUTPUT_QOS)
+        self.status_pub = self.create_publisher(DiagnosticArray, VTR_STATUS_TOPIC, OUTPUT_QOS)
+        self.image_pubs = {"fv": self.create_publisher(Image, VTR_FV_TOPIC, OUTPUT_QOS),
+                           "fr": self.create_publisher(Image, VTR_FR_TOPIC, OUTPUT_QOS)}
         for side, (image_topic, info_topic) in _SIDES.items():
-            self.create_subscription(Image, image_topic, lambda m, s=side: self._on_image(m, s), SENSOR_QOS,
+            self.create_subscription(Image, image_topic, lambda m, s=side: self._on_image(m, s), OUTPUT_QOS,
                                      callback_group=inputs)
-            self.create_subscription(CameraInfo, info_topic, lambda m, s=side: self._on_info(m, s), SENSOR_QOS,
+            self.create_subscription(CameraInfo, info_topic, lambda m, s=side: self._on_info(m, s), OUTPUT_QOS,
                                      callback_group=inputs)
         self.work_trigger = self.create_guard_condition(self._work, callback_group=work)
         self.finish_service = self.create_service(Trigger, VTR_FINISH_TEACH_SERVICE, self._on_finish,

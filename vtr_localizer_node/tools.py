@@ -54,7 +54,7 @@ def _wait_idle(node: Any, executor: Any, *, settle_s: float, timeout_s: float, s
                pid: int | None = None) -> dict:
     from diagnostic_msgs.msg import DiagnosticArray
 
-    from lightfast.ros.qos import SENSOR_QOS
+    from lightfast.ros.qos import OUTPUT_QOS
 
     latest: dict[str, str] = {}
 
@@ -64,7 +64,7 @@ def _wait_idle(node: Any, executor: Any, *, settle_s: float, timeout_s: float, s
                 latest.clear()
                 latest.update(diagnostic_values(s))
 
-    node.create_subscription(DiagnosticArray, VTR_STATUS_TOPIC, on_status, SENSOR_QOS)
+    node.create_subscription(DiagnosticArray, VTR_STATUS_TOPIC, on_status, OUTPUT_QOS)
     deadline = time.monotonic() + timeout_s
     key: tuple[str, ...] | None = None
     since = time.monotonic()

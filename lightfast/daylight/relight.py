@@ -30,7 +30,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from lightfast.camera import PinholeCamera
-from lightfast.config import Config, param
+from lightfast.config import param
 from lightfast.daylight.brightness import (
     COMPONENTS,
     MIN_REFLECTANCE,
@@ -43,6 +43,7 @@ from lightfast.daylight.brightness import (
 from lightfast.daylight.brightness import warm_up as warm_up_brightness
 from lightfast.daylight.crf import CameraResponse
 from lightfast.daylight.lighting_map import LightingMap
+from lightfast.node_options import SensorInputOptions, StampOptions
 
 __all__ = ["REFERENCE_KINDS", "DaylightRelighter", "Reference", "RelightConfig"]
 
@@ -54,8 +55,9 @@ _GREY = np.array([0.299, 0.587, 0.114])
 
 
 @dataclass(frozen=True)
-class RelightConfig(Config):
-    """Brightness estimation and reference rendering (paper §III-C, §III-D)."""
+class RelightConfig(SensorInputOptions, StampOptions):
+    """Brightness estimation and reference rendering (paper §III-C, §III-D), and the node's frames, sensor QoS and
+    stamp checks (``daylight_relight_node``)."""
 
     lighting_map: str = param("", description="Lighting map directory made by `lightfast daylight prepare`.",
                               read_only=True)
@@ -75,6 +77,13 @@ class RelightConfig(Config):
                                    "reflectance in any channel.", min=0.0, max=1.0)
     min_pixels: int = param(10, description="Frames with fewer valid pixels in Omega do not update the scales.",
                             min=1)
+    map_frame: str = param("map", description="Frame of the lighting map; coarse poses must be in it.",
+                           read_only=True)
+    max_sun_epoch_ahead_s: float = param(
+        600.0, min=0.0, max=86_400.0,
+        description="A sun update epoch stamped more than this ahead of the node's clock is refused (epochs are the "
+        "time an update finishes, ahead of the clock by the update's duration); 0 turns the check off.",
+    )
 
 
 @dataclass(frozen=True, eq=False)
@@ -204,6 +213,10 @@ class DaylightRelighter:
         cfg = self.config
         return BrightnessEstimator(self.crf, names=self.names, window=cfg.window, method=cfg.method,  # type: ignore[arg-type]
                                    solver=cfg.solver, min_pixels=cfg.min_pixels)  # type: ignore[arg-type]
+
+    def restart_average(self) -> None:
+        """Forget the scales averaged so far (time went back: the frames of the window are from another time)."""
+        self.estimator = self._make_estimator()
 
     def reconfigure(self, config: RelightConfig) -> None:
         """Apply new options; the scale average restarts if the estimation options changed."""

@@ -177,6 +177,12 @@ class SunUpdatePipeline:
         self.last_start_ns: int | None = None
         self.epochs_started = 0
 
+    def restart(self) -> None:
+        """Time went back (a bag played again, a restarted simulation): drop the running update (its epoch lies in
+        the old future); the next :meth:`step` starts one for the new time."""
+        self.current = None
+        self.last_start_ns = None
+
     def sun(self, now_ns: int) -> SunPosition:
         return sun_position(self.site, int(now_ns))
 
@@ -211,7 +217,9 @@ class SunEpochAssembler:
     """Receiver side of the chunk stream (§III-E): collects the chunks of each epoch and hands out B̂_sun only
     when an epoch covers every vertex, so a consumer swaps in a new B̂_sun atomically and never renders a mix.
 
-    Chunks of an older epoch than the newest one seen are dropped; a newer epoch replaces an unfinished one.
+    Chunks of an older epoch than the newest one seen are dropped (:meth:`drop_reason` says why, for the log); a
+    newer epoch replaces an unfinished one. After time went back (a bag played again), :meth:`restart` makes the
+    next complete epoch count whatever its time.
     """
 
     def __init__(self, num_vertices: int) -> None:
@@ -231,6 +239,20 @@ class SunEpochAssembler:
     def progress(self) -> float:
         """Share of the vertices received for the pending epoch."""
         return float(np.count_nonzero(self._have)) / self.num_vertices
+
+    def drop_reason(self, epoch_ns: int) -> str | None:
+        """Why :meth:`add` would drop a chunk of ``epoch_ns`` (``None``: it would take it)."""
+        if self.completed_epoch_ns is not None and epoch_ns < self.completed_epoch_ns:
+            return f"older than the epoch in use ({self.completed_epoch_ns})"
+        if self._epoch_ns is not None and epoch_ns < self._epoch_ns:
+            return f"older than the epoch being received ({self._epoch_ns})"
+        return None
+
+    def restart(self) -> None:
+        """Forget the epochs seen (time went back): the next epoch completed is handed out, however old."""
+        self.completed_epoch_ns = None
+        self._epoch_ns = None
+        self._have[:] = False
 
     def add(self, epoch_ns: int, vertex_ids: ArrayLike, radiosity: ArrayLike) -> NDArray[np.float32] | None:
         """Add one chunk; returns the complete B̂_sun (V, 3) when this chunk completes its epoch, else ``None``.

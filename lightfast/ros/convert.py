@@ -42,6 +42,7 @@ from lightfast.errors import LightfastError
 from lightfast.ros.msgtypes import RCLPY, MessageTypes
 
 __all__ = [
+    "COLOR_ENCODINGS",
     "IMAGE_ENCODINGS",
     "QUATERNION_NORM_TOLERANCE",
     "ROTATION_TOLERANCE",
@@ -60,6 +61,7 @@ __all__ = [
     "camera_info_from_camera",
     "image_fields",
     "image_to_numpy",
+    "image_to_rgb",
     "make_header",
     "matrix_to_odometry",
     "matrix_to_pose",
@@ -72,6 +74,7 @@ __all__ = [
     "pointcloud2_to_numpy",
     "pose_stamped_to_matrix",
     "pose_to_matrix",
+    "pose_with_covariance_to_matrix",
     "stamp_to_ns",
     "xyz_to_pointcloud2",
 ]
@@ -227,6 +230,32 @@ def image_to_numpy(msg: Any) -> NDArray[Any]:
     if not dtype.isnative:
         out = out.astype(dtype.newbyteorder("="))
     return out
+
+
+#: Colour encodings real camera drivers send, and the channel order that makes each RGB.
+_TO_RGB: Mapping[str, slice | list[int]] = MappingProxyType(
+    {"rgb8": slice(None), "bgr8": [2, 1, 0], "rgba8": slice(0, 3), "bgra8": [2, 1, 0]}
+)
+COLOR_ENCODINGS = tuple(_TO_RGB)
+"""Colour encodings :func:`image_to_rgb` takes."""
+
+
+def image_to_rgb(msg: Any, *, allow_mono: bool = False) -> NDArray[np.uint8]:
+    """The pixels of a colour ``sensor_msgs/Image`` as ``(H, W, 3)`` RGB uint8, whatever channel order the driver
+    sent (:data:`COLOR_ENCODINGS`); with ``allow_mono`` a ``mono8`` image comes as ``(H, W)`` grey. A view of the
+    message for ``rgb8`` (and ``mono8``), a copy otherwise. Raises :class:`ImageConversionError` naming the
+    encoding for anything else."""
+    encoding = msg.encoding
+    if allow_mono and encoding == "mono8":
+        return image_to_numpy(msg)
+    order = _TO_RGB.get(encoding) if isinstance(encoding, str) else None
+    if order is None:
+        accepted = ", ".join(COLOR_ENCODINGS + (("mono8",) if allow_mono else ()))
+        raise ImageConversionError(f"colour image encoding {encoding!r} is not supported (accepted: {accepted})")
+    pixels = image_to_numpy(msg)
+    if encoding == "rgb8":
+        return pixels
+    return np.ascontiguousarray(pixels[:, :, order])
 
 
 def image_fields(array: ArrayLike, encoding: str) -> ImageFields:
@@ -613,6 +642,13 @@ def pose_stamped_to_matrix(msg: Any) -> tuple[NDArray[np.float64], int, str]:
     """``(T_frame_pose, stamp_ns, frame_id)`` of a ``geometry_msgs/PoseStamped``."""
     stamp_ns, frame_id = _header_of(msg)
     return _pose_to_matrix(msg.pose, "PoseStamped.pose"), stamp_ns, frame_id
+
+
+def pose_with_covariance_to_matrix(msg: Any) -> tuple[NDArray[np.float64], int, str]:
+    """``(T_frame_pose, stamp_ns, frame_id)`` of a ``geometry_msgs/PoseWithCovarianceStamped`` (RViz's
+    ``/initialpose``); the covariance is not read."""
+    stamp_ns, frame_id = _header_of(msg)
+    return _pose_to_matrix(msg.pose.pose, "PoseWithCovarianceStamped.pose.pose"), stamp_ns, frame_id
 
 
 def matrix_to_pose_stamped(T: ArrayLike, *, stamp_ns: int, frame_id: str, types: MessageTypes = RCLPY) -> Any:

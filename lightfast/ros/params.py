@@ -8,6 +8,7 @@ dataclass rejects is refused with the validation message, an accepted one update
 from __future__ import annotations
 
 import dataclasses
+import difflib
 from collections.abc import Callable
 from typing import Any, Generic, TypeVar
 
@@ -98,7 +99,12 @@ class ConfigParameters(Generic[C]):
     def __init__(self, node: Node, cls: type[C], *, on_change: Callable[[C], None] | None = None) -> None:
         self.node = node
         self.cls = cls
-        self.config: C = declare_config(node, cls)
+        try:
+            self.config: C = declare_config(node, cls)
+        except ConfigError as exc:  # a misspelt name is the likeliest cause of a missing or wrong value: say so
+            unknown = "; ".join(_unknown_text(n, c) for n, c in unknown_parameters(node).items())
+            raise ConfigError(f"{exc}" + (f" ({unknown})" if unknown else "")) from None
+        report_unknown_parameters(node)
         self._specs = {s.name: s for s in field_specs(cls)}
         self.on_change = on_change
         node.add_on_set_parameters_callback(self._validate)
@@ -119,3 +125,31 @@ class ConfigParameters(Generic[C]):
         self.config = self._candidate(params)
         if self.on_change is not None:
             self.on_change(self.config)
+
+
+#: Parameters rclpy or ROS tooling may set on any node without the node declaring them.
+_FOREIGN_PREFIXES = ("qos_overrides.", "start_type_description_service")
+
+
+def unknown_parameters(node: Node) -> dict[str, str | None]:
+    """Parameters given to ``node`` (``-p``, ``--params-file``) that it did not declare, each with the closest
+    declared name (or ``None``). Reads rclpy's override table: rclpy has no public call for it."""
+    overrides = getattr(node, "_parameter_overrides", {})
+    declared = sorted(node._parameters) if hasattr(node, "_parameters") else []
+    return {
+        name: next(iter(difflib.get_close_matches(name, declared, n=1, cutoff=0.6)), None)
+        for name in sorted(overrides)
+        if name not in declared and not name.startswith(_FOREIGN_PREFIXES)
+    }
+
+
+def _unknown_text(name: str, closest: str | None) -> str:
+    return f"unknown parameter '{name}' ignored" + (f"; did you mean '{closest}'?" if closest else "")
+
+
+def report_unknown_parameters(node: Node) -> None:
+    """Log one warning per parameter the node does not know, naming the closest known one. (A warning, not an
+    error: a ``/**`` section of a parameter file shared by several nodes holds the others' parameters too.)"""
+    for name, closest in unknown_parameters(node).items():
+        node.get_logger().warning(f"{_unknown_text(name, closest)} (all of this node's parameters: "
+                                  f"config/{node.get_name()}.yaml)")

@@ -1,5 +1,11 @@
 """QoS profiles: lightfast's defaults per kind of topic, and conversions between bag QoS records and rclpy.
 
+Sensor subscriptions (images, camera_info, clouds from drivers) are best effort by default, like
+``rclpy.qos.qos_profile_sensor_data``: a best-effort subscription matches both best-effort publishers (the default
+or an option of most camera drivers) and reliable ones, where a reliable one would receive nothing from a
+best-effort driver. Each node's ``sensor_reliability`` parameter can ask for reliable delivery instead (lossless
+replays, tests). Outputs, and the topics between lightfast's own nodes, stay reliable.
+
 Bags store the QoS their publishers offered as rosbags :class:`~rosbags.interfaces.Qos` records; the enum values
 are the rmw ones, so conversion is by value.
 """
@@ -18,13 +24,24 @@ from rclpy.qos import (
 from rosbags.interfaces import Qos, QosDurability, QosReliability
 
 from lightfast.bag.writer import make_qos
+from lightfast.node_options import SENSOR_RELIABILITIES, SensorInputOptions
 
-#: Sensor streams published live (images, clouds): reliable so that replay and tests lose nothing.
-SENSOR_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
+#: What lightfast publishes (poses, references, status) and subscribes between its own nodes: reliable, volatile.
+OUTPUT_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
 #: Latched state (maps, static transforms): late subscribers get the last message.
 LATCHED_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 #: /clock, as rosbag2 and gazebo publish it.
 CLOCK_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
+
+
+def sensor_qos(options: SensorInputOptions) -> QoSProfile:
+    """The QoS of a sensor subscription: best effort (takes best-effort and reliable publishers) or reliable
+    (lossless, but deaf to best-effort publishers) as the node's options say; KEEP_LAST, volatile."""
+    assert options.sensor_reliability in SENSOR_RELIABILITIES  # validated by the options
+    best_effort = options.sensor_reliability == "best_effort"
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=options.sensor_queue_depth,
+                      reliability=ReliabilityPolicy.BEST_EFFORT if best_effort else ReliabilityPolicy.RELIABLE,
+                      durability=DurabilityPolicy.VOLATILE)
 
 
 def playback_qos(offered: Sequence[Qos], *, depth: int = 0) -> QoSProfile:

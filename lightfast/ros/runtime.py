@@ -2,21 +2,27 @@
 from __future__ import annotations
 
 import importlib
+import itertools
 import os
+import re
 import sys
 import threading
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
+from pathlib import Path
 
 import rclpy
+import rclpy.logging
+import yaml
 from rclpy.context import Context
-from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor, SingleThreadedExecutor
+from rclpy.executors import Executor, ExternalShutdownException, MultiThreadedExecutor, SingleThreadedExecutor
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.signals import SignalHandlerOptions
 
 from lightfast.bag.errors import UnknownMessageTypeError
+from lightfast.config import ConfigError
 from lightfast.errors import LightfastError
 from lightfast.ros.transport import use_local_transport
 
@@ -78,25 +84,79 @@ def message_class(msgtype: str) -> type:
         ) from None
 
 
+def _check_params_files(args: list[str]) -> None:
+    """Every ``--params-file`` in ``args`` exists and is YAML with a mapping at the top: checked here, before rcl
+    reads it, so that a bad file is one clear line rather than rcl's parser trace."""
+    for flag, path in itertools.pairwise(args):
+        if flag != "--params-file":
+            continue
+        try:
+            data = yaml.safe_load(Path(path).read_text())
+        except OSError as exc:
+            raise ConfigError(f"cannot read the parameter file {path}: {exc.strerror or exc}") from None
+        except yaml.YAMLError as exc:
+            raise ConfigError(f"the parameter file {path} is not valid YAML: {' '.join(str(exc).split())}") from None
+        if not isinstance(data, dict):
+            raise ConfigError(f"the parameter file {path} must map node names (or '/**') to 'ros__parameters'")
+
+
+def _rcl_message(exc: Exception) -> str:
+    """rcl's error text without the C source locations (``, at /project/src/parse.c:309``)."""
+    return " ".join(re.sub(r",? at /\S+:\d+", "", str(exc)).split())
+
+
+def _init_quietly(args: list[str] | None) -> None:
+    """``rclpy.init`` without rcl's own "[ERROR] [rcl]: Failed to parse global arguments" line when it refuses the
+    arguments: the caller prints one line of its own."""
+    rclpy.logging.set_logger_level("rcl", rclpy.logging.LoggingSeverity.FATAL)
+    try:
+        rclpy.init(args=args)
+    finally:
+        if rclpy.logging.get_logger_effective_level("rcl") == rclpy.logging.LoggingSeverity.FATAL:
+            rclpy.logging.set_logger_level("rcl", rclpy.logging.LoggingSeverity.UNSET)
+
+
+def spin(executor: Executor, node: Node) -> None:
+    """Spin until the context shuts down. An exception escaping a callback (rclpy's own, e.g. a negative /clock
+    message raises in its time source) is logged, throttled, and the node carries on: one bad message must not end
+    it. A :class:`LightfastError` still ends it (run_node turns it into one line and exit 1)."""
+    context = executor.context
+    while context.ok():
+        try:
+            executor.spin_once(timeout_sec=0.5)
+        except (LightfastError, KeyboardInterrupt, ExternalShutdownException, _rclpy.RCLError):
+            raise
+        except Exception as exc:  # the safety net of the docstring
+            node.get_logger().error(f"a callback failed, carrying on: {type(exc).__name__}: {exc}",
+                                    throttle_duration_sec=5.0)
+
+
 def run_node(make_node: Callable[[], Node], name: str, args: list[str] | None = None, *,
              num_threads: int = 1) -> int:
     """The ``main`` of a node executable: lightfast's DDS profile, init, spin until Ctrl-C / SIGTERM, clean up.
     ``num_threads`` > 1 spins a multi-threaded executor (for nodes whose callback groups may run in parallel).
 
-    A :class:`LightfastError` while constructing or spinning (bad parameters, a missing map) ends it with one line
-    ``<name>: error: …`` on stderr and exit code 1."""
+    A :class:`LightfastError` while constructing or spinning (bad parameters, a missing map), a parameter file that
+    cannot be read, or arguments rcl refuses end it with one line ``<name>: error: …`` on stderr and exit code 1.
+    (Parameters the node does not know are reported by :class:`~lightfast.ros.params.ConfigParameters`.)"""
     use_local_transport()
-    rclpy.init(args=args)
+    argv = list(sys.argv[1:] if args is None else args)
+    try:
+        _check_params_files(argv)
+        _init_quietly(argv if args is not None else None)
+    except LightfastError as exc:
+        print(f"{name}: error: {exc}", file=sys.stderr)
+        return 1
+    except _rclpy.RCLError as exc:
+        print(f"{name}: error: {_rcl_message(exc)}", file=sys.stderr)
+        return 1
     node = None
-    executor: MultiThreadedExecutor | None = None
+    executor: Executor | None = None
     try:
         node = make_node()
-        if num_threads > 1:
-            executor = MultiThreadedExecutor(num_threads=num_threads)
-            executor.add_node(node)
-            executor.spin()
-        else:
-            rclpy.spin(node)
+        executor = MultiThreadedExecutor(num_threads=num_threads) if num_threads > 1 else SingleThreadedExecutor()
+        executor.add_node(node)
+        spin(executor, node)
     except LightfastError as exc:
         print(f"{name}: error: {exc}", file=sys.stderr)
         return 1

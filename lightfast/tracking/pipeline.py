@@ -36,6 +36,7 @@ from numpy.typing import ArrayLike, NDArray
 from lightfast.camera import PinholeCamera
 from lightfast.config import ConfigError, param
 from lightfast.geometry import make_transform, quat_to_matrix, rotation_angle_deg
+from lightfast.node_options import SensorInputOptions, StampOptions
 from lightfast.tracking.rgbd_odometry import (
     AlignResult,
     RGBDFrame,
@@ -51,12 +52,23 @@ log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
-class TrackerConfig(TrackingConfig):
-    """Options of the two-step tracker (``rgbd_tracker_node``): the Eq. 7 options plus the f2m acceptance."""
+class TrackerConfig(TrackingConfig, SensorInputOptions, StampOptions):
+    """Options of the two-step tracker (``rgbd_tracker_node``): the Eq. 7 options plus the f2m acceptance, and the
+    node's frames, sensor QoS and stamp checks."""
+
+    map_frame: str = param("map", description="Frame of the published poses (REP 105's map); /tracker/reset and "
+                           "/initialpose must be in it.", read_only=True)
+    camera_frame: str = param("", description="Child frame of the pose on /tf and /tracker/odometry; empty: the "
+                              "colour image's frame_id (camera_color_optical_frame if that is empty). On a robot "
+                              "whose TF tree has the camera frame already, name another frame here (a frame has "
+                              "one parent).", read_only=True)
+    publish_tf: bool = param(True, description="Broadcast each pose on /tf as map_frame -> camera_frame.",
+                             read_only=True)
 
     initial_pose: tuple[float, ...] = param(
         (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0),
-        description="Start pose T_map_cam as x y z (m) qx qy qz qw; /tracker/reset overrides it.",
+        description="Start pose T_map_cam as x y z (m) qx qy qz qw, also after time jumped back (a bag played "
+        "again); /initialpose and /tracker/reset override it.",
     )
     reference_timeout_s: float = param(0.5, description="A frame whose reference has not arrived after this "
                                        "long (wall time) is finished with its f2f pose.", min=0.0, max=60.0)

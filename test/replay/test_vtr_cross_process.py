@@ -20,7 +20,7 @@ from lightfast.bag.writer import BagWriter, make_qos
 from lightfast.ros.convert import matrix_to_pose_stamped, numpy_to_image
 from lightfast.ros.diagnostics import diagnostic_values
 from lightfast.ros.msgtypes import rosbags_types
-from lightfast.ros.qos import SENSOR_QOS
+from lightfast.ros.qos import OUTPUT_QOS
 from lightfast.ros.spin import spin_until
 from lightfast.topics import (
     GT_POSE_TOPIC,
@@ -112,10 +112,10 @@ def test_sigint_during_a_teach_leaves_the_previous_map(tmp_path: Path, domain_id
     probe = make_node("teacher")
     topics = {"left": (Image, STEREO_LEFT_IMAGE_TOPIC), "right": (Image, STEREO_RIGHT_IMAGE_TOPIC),
               "left_info": (CameraInfo, STEREO_LEFT_INFO_TOPIC), "right_info": (CameraInfo, STEREO_RIGHT_INFO_TOPIC)}
-    pubs = {k: probe.create_publisher(t, topic, SENSOR_QOS) for k, (t, topic) in topics.items()}
+    pubs = {k: probe.create_publisher(t, topic, OUTPUT_QOS) for k, (t, topic) in topics.items()}
     status: dict[str, str] = {}
     probe.create_subscription(DiagnosticArray, VTR_STATUS_TOPIC,
-                              lambda msg: status.update(diagnostic_values(msg.status[0])), SENSOR_QOS)
+                              lambda msg: status.update(diagnostic_values(msg.status[0])), OUTPUT_QOS)
     cmd = [sys.executable, "-m", "vtr_localizer_node.node", "--ros-args", "-p", "mode:=teach", "-p",
            f"map_path:={map_path}", "-p", "overwrite_map:=true", "-p", "max_queued_frames:=100"]
     with bounded_process(cmd, timeout_s=240, env=child_env(domain_id)) as proc:

@@ -6,7 +6,9 @@ from rcl_interfaces.msg import ParameterType
 from rclpy.parameter import Parameter
 
 from lightfast.config import Config, ConfigError, param
-from lightfast.ros.params import ConfigParameters, declare_config
+from lightfast.nodes import NODE_CONFIGS, node_config_class
+from lightfast.ros.params import ConfigParameters, declare_config, unknown_parameters
+from test.conftest import ROOT
 
 
 @dataclass(frozen=True)
@@ -64,3 +66,43 @@ def test_runtime_changes_are_checked_by_the_dataclass(make_node) -> None:
     assert node.set_parameters([Parameter("mode", value="b")])[0].successful
     assert params.config.mode == "b" and seen[-1].mode == "b"
     assert not node.set_parameters([Parameter("map_path", value="/x")])[0].successful  # read-only
+
+
+# --- the shipped parameter files, read by rcl --------------------------------------------------------------------
+
+def _node_from_params_file(path, node_name: str, domain_id: int):
+    """A context initialised with ``--ros-args --params-file path`` (rcl parses the file) and a node named like
+    the real one: what `ros2 run lightfast <node> --ros-args --params-file path` gives the node's parameters."""
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.node import Node
+    from rclpy.signals import SignalHandlerOptions
+
+    context = Context()
+    rclpy.init(args=["--ros-args", "--params-file", str(path)], context=context, domain_id=domain_id,
+               signal_handler_options=SignalHandlerOptions.NO)
+    return context, Node(node_name, context=context)
+
+
+@pytest.mark.parametrize("node_name", sorted(NODE_CONFIGS))
+def test_every_shipped_parameter_file_loads_through_rcl(node_name: str, domain_id: int) -> None:
+    """config/<node>.yaml through rcl's own YAML parser gives exactly the dataclass defaults (rcl read the unquoted
+    ``init_axes: [x, y]`` as booleans and refused the file), and no key the node does not know."""
+    import rclpy
+
+    path = ROOT / "config" / f"{node_name}.yaml"
+    cls = node_config_class(node_name)
+    context, node = _node_from_params_file(path, node_name, domain_id)
+    try:
+        assert declare_config(node, cls) == cls()
+        assert unknown_parameters(node) == {}
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown(context=context)
+
+
+def test_an_unknown_parameter_is_reported_with_the_closest_name(make_node) -> None:
+    node = make_node("params_typo", parameter_overrides=[Parameter("chunk_sise", value=3),
+                                                         Parameter("zzz_nothing_like_it", value=1.0)])
+    declare_config(node, DemoConfig)
+    assert unknown_parameters(node) == {"chunk_sise": "chunk_size", "zzz_nothing_like_it": None}

@@ -37,7 +37,7 @@ from lightfast.ros.convert import (
     xyz_to_pointcloud2,
 )
 from lightfast.ros.diagnostics import Level, diagnostic_level, diagnostic_values
-from lightfast.ros.qos import SENSOR_QOS
+from lightfast.ros.qos import OUTPUT_QOS
 from lightfast.ros.racr_msgs import matrix_to_transform_stamped, transform_stamped_to_matrix
 from lightfast.ros.spin import spin_until
 from lightfast.sim.racr_live import evaluate_final_pose
@@ -87,8 +87,8 @@ class Probe:
         self.node = make_node(name)
         self.motions: list[TransformStamped] = []
         self.status: list[tuple[Level, str, dict[str, str]]] = []
-        self.node.create_subscription(TransformStamped, RACR_HAND_MOTION_TOPIC, self.motions.append, SENSOR_QOS)
-        self.node.create_subscription(DiagnosticArray, RACR_STATUS_TOPIC, self._on_status, SENSOR_QOS)
+        self.node.create_subscription(TransformStamped, RACR_HAND_MOTION_TOPIC, self.motions.append, OUTPUT_QOS)
+        self.node.create_subscription(DiagnosticArray, RACR_STATUS_TOPIC, self._on_status, OUTPUT_QOS)
         self.pubs: dict[str, object] = {}
 
     def _on_status(self, msg: DiagnosticArray) -> None:
@@ -98,7 +98,7 @@ class Probe:
 
     def publisher(self, msg_type: type, topic: str):
         if topic not in self.pubs:
-            self.pubs[topic] = self.node.create_publisher(msg_type, topic, SENSOR_QOS)
+            self.pubs[topic] = self.node.create_publisher(msg_type, topic, OUTPUT_QOS)
         return self.pubs[topic]
 
     def spin_until(self, predicate: Callable[[], bool], timeout_s: float = 30.0) -> bool:
@@ -150,8 +150,8 @@ def test_racr_platform_and_vse_nodes_relocalize_the_camera(scene_dir: Path, star
     probe = Probe(make_node, executor)
     aligned: list[PointCloud2] = []
     camera_poses: list[PoseStamped] = []
-    probe.node.create_subscription(PointCloud2, RACR_ALIGNED_CLOUD_TOPIC, aligned.append, SENSOR_QOS)
-    probe.node.create_subscription(PoseStamped, RACR_CAMERA_POSE_TOPIC, camera_poses.append, SENSOR_QOS)
+    probe.node.create_subscription(PointCloud2, RACR_ALIGNED_CLOUD_TOPIC, aligned.append, OUTPUT_QOS)
+    probe.node.create_subscription(PoseStamped, RACR_CAMERA_POSE_TOPIC, camera_poses.append, OUTPUT_QOS)
     platform = start(RacrPlatformSimNode, scene_path=str(scene_dir), time_scale=20.0, seed=3)
     start(RacrVseNode, scene_path=str(scene_dir), seed=4)
     racr = start(RacrNode, reference_path=str(scene_dir / "reference"), reference_scene="S01", eta=3e-3,
@@ -210,7 +210,7 @@ class Rig:
         self.pose_pub = probe.publisher(PoseStamped, PLATFORM_POSE_TOPIC)
         self.stopped_pub = probe.publisher(PoseStamped, PLATFORM_STOPPED_TOPIC)
         self.vse_pub = probe.publisher(PoseStamped, VSE_POSE_TOPIC)
-        node.create_subscription(TransformStamped, RACR_HAND_MOTION_TOPIC, self._on_command, SENSOR_QOS)
+        node.create_subscription(TransformStamped, RACR_HAND_MOTION_TOPIC, self._on_command, OUTPUT_QOS)
         self.now_ns = lambda: node.get_clock().now().nanoseconds
 
     def T_vse_cam(self) -> np.ndarray:
@@ -386,11 +386,11 @@ def test_platform_simulator_refuses_garbage_and_reports_stops(scene_dir: Path, s
     stops: list[PoseStamped] = []
     truth: list[PoseStamped] = []
     status: list[dict[str, str]] = []
-    probe.create_subscription(PoseStamped, PLATFORM_STOPPED_TOPIC, stops.append, SENSOR_QOS)
-    probe.create_subscription(PoseStamped, SIM_CAMERA_POSE_TOPIC, truth.append, SENSOR_QOS)
+    probe.create_subscription(PoseStamped, PLATFORM_STOPPED_TOPIC, stops.append, OUTPUT_QOS)
+    probe.create_subscription(PoseStamped, SIM_CAMERA_POSE_TOPIC, truth.append, OUTPUT_QOS)
     probe.create_subscription(DiagnosticArray, PLATFORM_STATUS_TOPIC,
-                              lambda m: status.append(diagnostic_values(m.status[0])), SENSOR_QOS)
-    pub = probe.create_publisher(TransformStamped, RACR_HAND_MOTION_TOPIC, SENSOR_QOS)
+                              lambda m: status.append(diagnostic_values(m.status[0])), OUTPUT_QOS)
+    pub = probe.create_publisher(TransformStamped, RACR_HAND_MOTION_TOPIC, OUTPUT_QOS)
     platform = start(RacrPlatformSimNode, scene_path=str(scene_dir), time_scale=100.0)
     assert spin_until(executor, lambda: pub.get_subscription_count() > 0 and truth, 20.0)
     T0 = platform.platform.true_camera_pose

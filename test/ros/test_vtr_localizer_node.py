@@ -40,7 +40,7 @@ from lightfast.ros.convert import (
 )
 from lightfast.ros.diagnostics import Level, diagnostic_level, diagnostic_values
 from lightfast.ros.msgtypes import RCLPY, MessageTypes
-from lightfast.ros.qos import SENSOR_QOS
+from lightfast.ros.qos import OUTPUT_QOS
 from lightfast.ros.spin import spin_until
 from lightfast.topics import (
     STEREO_LEFT_FRAME,
@@ -135,12 +135,12 @@ class Probe:
     def __init__(self, make_node: Callable[..., Node], executor: Executor) -> None:
         self.executor = executor
         self.node = make_node("vtr_probe")
-        self.pubs = {k: self.node.create_publisher(t, topic, SENSOR_QOS) for k, (t, topic) in INPUTS.items()}
+        self.pubs = {k: self.node.create_publisher(t, topic, OUTPUT_QOS) for k, (t, topic) in INPUTS.items()}
         self.got: dict[str, dict[int, object]] = defaultdict(dict)
         self.status: list[DiagnosticArray] = []
-        self.subs = [self.node.create_subscription(DiagnosticArray, VTR_STATUS_TOPIC, self.status.append, SENSOR_QOS)]
+        self.subs = [self.node.create_subscription(DiagnosticArray, VTR_STATUS_TOPIC, self.status.append, OUTPUT_QOS)]
         for key, (t, topic) in OUTPUTS.items():
-            self.subs.append(self.node.create_subscription(t, topic, self._recorder(key), SENSOR_QOS))
+            self.subs.append(self.node.create_subscription(t, topic, self._recorder(key), OUTPUT_QOS))
         self.client = self.node.create_client(Trigger, VTR_FINISH_TEACH_SERVICE)
 
     def _recorder(self, key: str) -> Callable[[object], None]:
