@@ -7,12 +7,14 @@ from collections import defaultdict
 from pathlib import Path
 
 import numpy as np
+from builtin_interfaces.msg import Time
 from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import PointCloud2
 
 from lightfast.bag import BagWriter
 from lightfast.daylight.lighting_map import LightingMap
-from lightfast.ros.convert import pointcloud2_to_numpy, stamp_to_ns
+from lightfast.ros.convert import ns_to_stamp, pointcloud2_to_numpy, stamp_to_ns
 from lightfast.ros.spin import spin_until
 from test.helpers import LIGHTFAST, bounded_process, child_env, run_bounded
 
@@ -22,10 +24,10 @@ START_NS = int(dt.datetime(2026, 6, 21, 11, 0, tzinfo=dt.UTC).timestamp() * 1e9)
 def tick_bag(path: Path, seconds: float = 4.0, hz: float = 20.0) -> Path:
     with BagWriter(path) as bag:
         bag.add_topic("/tick", "std_msgs/msg/Header")
-        Header, Time = bag.typestore.types["std_msgs/msg/Header"], bag.typestore.types["builtin_interfaces/msg/Time"]
+        Header, BagTime = bag.typestore.types["std_msgs/msg/Header"], bag.typestore.types["builtin_interfaces/msg/Time"]
         for i in range(int(seconds * hz)):
             t = START_NS + int(i * 1e9 / hz)
-            bag.write_message("/tick", t, Header(stamp=Time(sec=t // 10**9, nanosec=t % 10**9), frame_id="x"))
+            bag.write_message("/tick", t, Header(stamp=BagTime(sec=t // 10**9, nanosec=t % 10**9), frame_id="x"))
     return path
 
 
@@ -54,3 +56,33 @@ def test_node_follows_bag_clock(tmp_path: Path, tiny_lighting_map: Path, domain_
     complete = [e for e, parts in chunks.items() if sum(len(p) for p in parts) == V]
     assert complete, {e: sum(len(p) for p in parts) for e, parts in chunks.items()}
     assert all(START_NS <= e <= START_NS + 10 * 10**9 for e in chunks)  # stamped in bag time, not wall time
+
+
+def test_a_negative_clock_does_not_end_the_node(tiny_lighting_map: Path, domain_id: int, make_node,
+                                                executor) -> None:
+    """rclpy's time source raises on a /clock message with a negative time, through the executor: the node ended
+    with a traceback. run_node logs it (throttled) and the node carries on with the next good /clock."""
+    chunks: list[int] = []
+    node = make_node("clock_fuzzer")
+    node.create_subscription(PointCloud2, "/radiosity/sun_chunk", lambda m: chunks.append(stamp_to_ns(m.header.stamp)),
+                             QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE))
+    clock = node.create_publisher(Clock, "/clock", 10)
+    cmd = [sys.executable, "-m", "sun_update_node.node", "--ros-args", "-p", f"lighting_map:={tiny_lighting_map}",
+           "-p", "use_sim_time:=true", "-p", "chunk_vertices:=400", "-p", "step_period_s:=0.01"]
+    with bounded_process(cmd, timeout_s=120, env=child_env(domain_id)) as proc:
+        assert spin_until(executor, lambda: node.count_publishers("/radiosity/sun_chunk") == 1
+                          and clock.get_subscription_count() == 1, timeout_s=60)
+        for _ in range(5):
+            clock.publish(Clock(clock=Time(sec=-5, nanosec=0)))
+            spin_until(executor, lambda: False, timeout_s=0.05)
+        t = START_NS
+        while not chunks and t < START_NS + 20 * 10**9:  # good /clock messages at 100 Hz
+            t += 10**7
+            clock.publish(Clock(clock=ns_to_stamp(t)))
+            spin_until(executor, lambda: False, timeout_s=0.01)
+        alive = proc.poll() is None
+        proc.terminate()
+        _, err = proc.communicate(timeout=30)
+    assert alive, err
+    assert chunks and all(c >= START_NS for c in chunks)
+    assert "a callback failed, carrying on" in err and "Traceback" not in err

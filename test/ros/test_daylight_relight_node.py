@@ -6,6 +6,7 @@ live frames rendered with known brightness scales at known poses, and a gamma ca
 """
 from __future__ import annotations
 
+import time
 from collections import defaultdict
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -333,3 +334,42 @@ def test_bad_inputs_are_reported_and_the_node_keeps_running(relight, scene: Scen
     probe.publish("image", image_msg(scene, 1))
     assert probe.spin_until(lambda: stamp(1) in probe.got["color"])
     assert node.relighter.sun_epoch_ns == stamp(0)
+
+
+# --- time that misbehaves ------------------------------------------------------------------------------------
+
+def epoch_in_use(node) -> int | None:
+    return node.relighter.sun_epoch_ns
+
+
+def test_a_bogus_future_epoch_is_refused_and_logged_and_later_epochs_still_come_in(relight, scene: Scene) -> None:
+    """Before: one epoch stamped far ahead was swapped in, and every real epoch after it was silently dropped as
+    older -- the sunlight froze for good."""
+    node, probe = relight(window=1)
+    send_epoch(probe, scene.sun, stamp(0))
+    assert probe.spin_until(lambda: epoch_in_use(node) == stamp(0))
+    bogus = time.time_ns() + 365 * 86_400 * 10**9  # a year ahead of the node's wall clock
+    send_epoch(probe, scene.sun * 2, bogus)
+    assert probe.spin_until(lambda: node.stats["dropped_epochs"] == 1)
+    send_epoch(probe, scene.sun * 3, stamp(10))
+    assert probe.spin_until(lambda: epoch_in_use(node) == stamp(10))
+    assert node.stats["dropped_epochs"] == 1  # one line for the bogus epoch (all its chunks)
+
+
+def test_an_older_epoch_is_dropped_with_a_log_line_until_time_jumps_back(relight, scene: Scene) -> None:
+    node, probe = relight(window=1, time_jump_back_s=0.01)
+    probe.publish("info", camera_info_from_camera(scene.camera, frame_id="camera_color_optical_frame"))
+    send_epoch(probe, scene.sun, stamp(5))
+    assert probe.spin_until(lambda: epoch_in_use(node) == stamp(5))
+    for i in (2, 3):  # frames: the newest stamp seen is stamp(3)
+        probe.publish("image", image_msg(scene, i))
+        probe.publish("pose", pose_msg(scene, i))
+    assert probe.spin_until(lambda: node.stats["references"] == 2)
+    send_epoch(probe, scene.sun, stamp(1))  # a sun node restarted after time went back: older than the one in use
+    assert probe.spin_until(lambda: node.stats["dropped_epochs"] == 1)
+    assert epoch_in_use(node) == stamp(5)
+    probe.publish("image", image_msg(scene, 0))  # the frames go back too: a bag played again
+    probe.publish("pose", pose_msg(scene, 0))
+    assert probe.spin_until(lambda: node.stats["time_jumps"] == 1 and node.stats["references"] == 3)
+    send_epoch(probe, scene.sun * 0.5, stamp(1))  # now taken: time went back
+    assert probe.spin_until(lambda: epoch_in_use(node) == stamp(1))

@@ -1,35 +1,44 @@
 """rgbd_tracker_node in-process: colour/depth pairing in either order, f2f pose when no reference comes, f2m refinement
-against a reference, reset, bad input without a crash, and the two daylight nodes tracking together."""
+against a reference, reset, bad input without a crash, and the two daylight nodes tracking together; and as real
+robots drive it: a best-effort camera driver, the colour encodings drivers send, /initialpose from RViz, the pose on
+/tf, time that jumps back (a bag played again) and a frame from the future."""
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray
-from geometry_msgs.msg import PoseStamped
+from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
 from nav_msgs.msg import Odometry
 from rclpy.executors import Executor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.qos import qos_profile_sensor_data
+from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 
 from daylight_relight_node.node import DaylightRelightNode
 from lightfast.geometry import matrix_to_quat, rotation_angle_deg, se3_exp
 from lightfast.ros.convert import (
     camera_info_from_camera,
+    matrix_to_pose,
     matrix_to_pose_stamped,
+    ns_to_stamp,
     numpy_to_image,
     odometry_to_matrix,
     pose_stamped_to_matrix,
 )
 from lightfast.ros.diagnostics import Level
+from lightfast.ros.tf import TF_QOS, TF_TOPIC
 from lightfast.topics import (
     COARSE_POSE_TOPIC,
     COLOR_INFO_TOPIC,
     COLOR_TOPIC,
     DEPTH_TOPIC,
+    INITIAL_POSE_TOPIC,
     OPTICAL_FRAME,
     REFERENCE_COLOR_TOPIC,
     REFERENCE_DEPTH_TOPIC,
@@ -262,3 +271,143 @@ def test_relight_and_tracker_nodes_track_together(start_nodes, scene: Scene) -> 
         assert dt < 0.005 and dr < 0.3, (i, dt, dr)
     assert errors(pose_of(probe.got["coarse"][stamp(0)]), scene.poses[0])[0] > 0.01  # f2m did the correcting
     assert relight.stats["references"] == len(scene.frames)
+
+
+# --- as real robots drive it ---------------------------------------------------------------------------------
+
+F2F_ONLY = {"reference_timeout_s": 0.05, "pose_prior_weight": 0.0}  # no relight node: the f2f pose is final
+
+
+def wait_pose(probe, i: int) -> np.ndarray:
+    assert probe.spin_until(lambda: stamp(i) in probe.got["pose"])
+    return pose_of(probe.got["pose"][stamp(i)])
+
+
+def test_a_best_effort_camera_gives_poses_and_reliable_asks_for_lossless(start_nodes, make_node,
+                                                                          scene: Scene) -> None:
+    """A driver publishing with sensor-data QoS (best effort): the default subscription takes it; a tracker told to
+    be reliable (sensor_reliability) does not even match it -- the behaviour before best-effort inputs."""
+    _, _, probe = start_nodes({"initial_pose": pose7(scene.poses[0]), "sensor_reliability": "best_effort",
+                                     **F2F_ONLY})
+    driver = make_node("camera_driver")
+    pubs = {key: driver.create_publisher(t, topic, qos_profile_sensor_data)
+            for key, (t, topic) in {"image": (Image, COLOR_TOPIC), "depth": (Image, DEPTH_TOPIC),
+                                    "info": (CameraInfo, COLOR_INFO_TOPIC)}.items()}
+    assert probe.spin_until(lambda: all(p.get_subscription_count() == 1 for p in pubs.values()))
+    probe.pubs.update(pubs)  # send_frame publishes through the driver now
+    for i in range(3):
+        probe.publish("info", camera_info_from_camera(scene.camera, frame_id=OPTICAL_FRAME))
+        send_frame(probe, scene, i)
+        dt, dr = errors(wait_pose(probe, i), scene.poses[i])
+        assert dt < 0.005 and dr < 0.3
+
+    start_nodes({"initial_pose": pose7(scene.poses[0]), "sensor_reliability": "reliable", **F2F_ONLY})
+    probe.spin_until(lambda: False, timeout_s=0.5)
+    assert all(p.get_subscription_count() == 1 for p in pubs.values())  # only the best-effort tracker matched
+
+
+@pytest.mark.parametrize("encoding", ["bgr8", "rgba8", "bgra8", "mono8"])
+def test_colour_encodings_of_real_drivers_track_like_rgb8(start_nodes, scene: Scene, encoding: str) -> None:
+    _, _, probe = start_nodes({"initial_pose": pose7(scene.poses[0]), **F2F_ONLY})
+    probe.publish("info", camera_info_from_camera(scene.camera, frame_id=OPTICAL_FRAME))
+    for i in range(3):
+        rgb, depth = scene.frames[i]
+        pixels = {"bgr8": rgb[:, :, ::-1], "rgba8": np.dstack([rgb, np.full(rgb.shape[:2], 255, np.uint8)]),
+                  "bgra8": np.dstack([rgb[:, :, ::-1], np.zeros(rgb.shape[:2], np.uint8)]),
+                  "mono8": np.rint(rgb.astype(float) @ [0.299, 0.587, 0.114]).astype(np.uint8)}[encoding]
+        probe.publish("image", numpy_to_image(np.ascontiguousarray(pixels), encoding, stamp_ns=stamp(i),
+                                              frame_id=OPTICAL_FRAME))
+        probe.publish("depth", numpy_to_image(depth, "32FC1", stamp_ns=stamp(i), frame_id=OPTICAL_FRAME))
+        dt, dr = errors(wait_pose(probe, i), scene.poses[i])
+        assert dt < 0.005 and dr < 0.3, (encoding, i, dt, dr)
+
+
+def test_an_unknown_encoding_is_named_in_the_log(start_nodes, scene: Scene) -> None:
+    _, _, probe = start_nodes({"initial_pose": pose7(scene.poses[0]), **F2F_ONLY})
+    rgb = scene.frames[0][0]
+    msg = Image(height=rgb.shape[0], width=rgb.shape[1], encoding="yuv422", step=2 * rgb.shape[1],
+                data=np.zeros(2 * rgb.shape[0] * rgb.shape[1], np.uint8).tobytes())
+    probe.publish("image", msg)
+    level, message, _ = probe.wait_status(lambda lvl, m, v: "yuv422" in m)
+    assert level == Level.WARN and "accepted: rgb8, bgr8, rgba8, bgra8, mono8" in message
+
+
+def test_initialpose_from_rviz_resets_and_the_pose_goes_out_on_tf(start_nodes, make_node, scene: Scene) -> None:
+    tf2_msgs = pytest.importorskip("tf2_msgs.msg", reason="tf2_msgs is built by scripts/setup.sh")
+    _, _, probe = start_nodes({"initial_pose": pose7(scene.poses[0] @ se3_exp([0.3, 0, 0, 0, 0, 0])),
+                                     "camera_frame": "tracked_camera", **F2F_ONLY})
+    listener = make_node("tf_listener")
+    transforms: list = []
+    listener.create_subscription(tf2_msgs.TFMessage, TF_TOPIC, lambda m: transforms.extend(m.transforms), TF_QOS)
+    rviz = make_node("rviz")
+    initialpose = rviz.create_publisher(PoseWithCovarianceStamped, INITIAL_POSE_TOPIC, 10)
+    assert probe.spin_until(lambda: initialpose.get_subscription_count() == 1)
+    msg = PoseWithCovarianceStamped()
+    msg.header.frame_id = "map"
+    msg.pose.pose = matrix_to_pose(scene.poses[0])
+    initialpose.publish(msg)
+    probe.wait_status(lambda lvl, m, v: m == "tracking reset")
+    probe.publish("info", camera_info_from_camera(scene.camera, frame_id=OPTICAL_FRAME))
+    for i in range(2):
+        send_frame(probe, scene, i)
+        dt, dr = errors(wait_pose(probe, i), scene.poses[i])
+        assert dt < 0.005 and dr < 0.3  # from /initialpose, not the 30-cm-off parameter
+    assert probe.spin_until(lambda: len(transforms) >= 2)
+    tf = transforms[1]
+    assert (tf.header.frame_id, tf.child_frame_id) == ("map", "tracked_camera")
+    assert tf.header.stamp == probe.got["pose"][stamp(1)].header.stamp
+    t = tf.transform.translation
+    np.testing.assert_allclose([t.x, t.y, t.z], pose_of(probe.got["pose"][stamp(1)])[:3, 3], atol=1e-9)
+    assert probe.got["odom"][stamp(1)].child_frame_id == "tracked_camera"
+
+
+def test_a_bag_played_again_restarts_tracking_at_initial_pose(start_nodes, scene: Scene) -> None:
+    """The same frames again (stamps going back 66 ms > time_jump_back_s): one restart at initial_pose, then
+    tracking as the first time. Before: every later frame was refused as 'not after the previous frame'."""
+    tracker, _, probe = start_nodes({"initial_pose": pose7(scene.poses[0]), "time_jump_back_s": 0.05, **F2F_ONLY})
+    probe.publish("info", camera_info_from_camera(scene.camera, frame_id=OPTICAL_FRAME))
+    first = []
+    for i in range(3):
+        send_frame(probe, scene, i)
+        first.append(wait_pose(probe, i))
+    probe.got["pose"].clear()
+    for i in range(3):  # played again: the same stamps
+        send_frame(probe, scene, i)
+        np.testing.assert_allclose(wait_pose(probe, i), first[i], atol=1e-9)
+    assert tracker.stats["time_jumps"] == 1
+
+
+def test_a_frame_from_the_future_is_refused_and_does_not_poison_later_frames(start_nodes, scene: Scene) -> None:
+    tracker, _, probe = start_nodes({"initial_pose": pose7(scene.poses[0]), **F2F_ONLY})
+    probe.publish("info", camera_info_from_camera(scene.camera, frame_id=OPTICAL_FRAME))
+    send_frame(probe, scene, 0)
+    wait_pose(probe, 0)
+    future = time.time_ns() + 3600 * 10**9  # an hour ahead of the node's (wall) clock
+    send_frame(probe, scene, 1, at=(future - stamp(0)) // 33_000_000)
+    level, message, _ = probe.wait_status(lambda lvl, m, v: "ahead of this node's clock" in m)
+    assert level == Level.WARN and "max_stamp_ahead_s" in message
+    for i in (1, 2):
+        send_frame(probe, scene, i)
+        dt, dr = errors(wait_pose(probe, i), scene.poses[i])
+        assert dt < 0.005 and dr < 0.3
+    assert tracker.stats["time_jumps"] == 0
+
+
+def test_sim_time_jumping_back_restarts_tracking(start_nodes, make_node, scene: Scene) -> None:
+    """On use_sim_time, /clock going back (bag play --loop) restarts tracking before the first frame of the loop;
+    a negative /clock message is survived by run_node (test/replay/test_node_startup.py)."""
+    tracker, _, probe = start_nodes({"initial_pose": pose7(scene.poses[0]), "use_sim_time": True, **F2F_ONLY})
+    clock = make_node("player").create_publisher(Clock, "/clock", 10)
+    assert probe.spin_until(lambda: clock.get_subscription_count() >= 1)
+    probe.publish("info", camera_info_from_camera(scene.camera, frame_id=OPTICAL_FRAME))
+    for i in range(3):
+        clock.publish(Clock(clock=ns_to_stamp(stamp(i))))
+        send_frame(probe, scene, i)
+        wait_pose(probe, i)
+    clock.publish(Clock(clock=ns_to_stamp(stamp(0) - 5 * 10**9)))  # the loop starts over, 5 s before
+    assert probe.spin_until(lambda: tracker.stats["time_jumps"] == 1)
+    probe.got["pose"].clear()
+    clock.publish(Clock(clock=ns_to_stamp(stamp(0))))
+    send_frame(probe, scene, 0)
+    np.testing.assert_allclose(wait_pose(probe, 0), scene.poses[0], atol=1e-6)  # at initial_pose again
+    assert tracker.stats["time_jumps"] == 1  # the frame stamps going back did not restart it a second time

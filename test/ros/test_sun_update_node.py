@@ -89,3 +89,38 @@ def test_invalid_parameter_changes_are_refused(make_node, executor, tiny_lightin
     finally:
         executor.remove_node(node)
         node.destroy_node()
+
+
+def test_the_sun_node_starts_a_new_update_when_sim_time_jumps_back(make_node, executor, tiny_lighting_map) -> None:
+    """/clock an hour back (a restarted simulation) while an update runs: the running update, aimed at the old
+    future, is dropped and the next epochs follow the new time."""
+    node = SunUpdateNode(context=executor.context, parameter_overrides=[
+        Parameter("lighting_map", value=str(tiny_lighting_map)), Parameter("use_sim_time", value=True),
+        Parameter("chunk_vertices", value=50), Parameter("step_period_s", value=0.01)])
+    executor.add_node(node)
+    player = make_node("player")
+    clock = player.create_publisher(Clock, "/clock", 10)
+    sim = {"t": NOON_NS}
+
+    def tick() -> None:  # sim time at wall speed: the node's timers run on it
+        sim["t"] += 10_000_000
+        clock.publish(Clock(clock=ns_to_stamp(sim["t"])))
+
+    player.create_timer(0.01, tick)
+    epochs: list[int] = []  # the epoch of each chunk, in arrival order
+    make_node("listener").create_subscription(PointCloud2, "/radiosity/sun_chunk",
+                                              lambda m: epochs.append(stamp_to_ns(m.header.stamp)), 1000)
+    try:
+        assert spin_until(executor, lambda: len(epochs) >= 2, 10.0)  # an update is streaming
+        old = epochs[0]
+        assert node.pipeline.current is not None and node.pipeline.current.epoch_ns == old
+        chunks_per_update = -(-node.pipeline.lmap.num_vertices // 50)
+        assert len(epochs) < chunks_per_update - 5
+        sim["t"] = NOON_NS - 3600 * 10**9
+        seen = len(epochs)
+        assert spin_until(executor, lambda: any(e < NOON_NS for e in epochs), 10.0)
+        # the old update, aimed at the old future, was dropped rather than finished first (a chunk or two in flight)
+        assert epochs[seen:].count(old) <= 2, (epochs[seen:].count(old), chunks_per_update)
+    finally:
+        executor.remove_node(node)
+        node.destroy_node()
