@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Set up lightfast on this machine: Debian libraries, a Python 3.11 venv with the pinned ROS 2 Jazzy wheels and
-# libraries of requirements.lock, and this checkout installed into it (editable).
+# libraries of requirements.lock, this checkout installed into it (editable), and the ROS interface packages
+# PyPI has no wheels for (tf2_msgs), built by scripts/build_interfaces.sh into a cache beside the venv.
 #
 # Idempotent and fast when nothing changed: the venv lives in ${LIGHTFAST_VENV_ROOT:-~/.cache/lightfast}/venv-<hash>,
 # keyed by the hash of requirements.lock and the interpreter, and is reused by every checkout with the same lock.
@@ -68,5 +69,9 @@ then
     >"$venv_root/pip-editable.log" 2>&1 || { tail -n 20 "$venv_root/pip-editable.log" >&2; die "installing $root failed"; }
   printf '%s\n' "$stamp" > "$venv/.checkout"
 fi
+
+# ROS interface packages that PyPI has no wheel for (tf2_msgs), built once into a cache beside the venv and
+# linked into it; a quick check when the cache is complete. See scripts/build_interfaces.sh.
+bash "$root/scripts/build_interfaces.sh" "$venv" "$py"
 
 ln -sfn "$venv" "$root/.venv"
