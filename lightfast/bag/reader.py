@@ -3,11 +3,18 @@
 Messages come as serialized CDR bytes in log-time order across topics, the order ``ros2 bag play`` uses. Every
 failure (missing path, truncated or corrupt file, unsupported version) is raised as a
 :class:`~lightfast.bag.errors.BagError` subclass with a one-line message.
+
+Indexed MCAP files (what rosbag2, rosbags and :class:`~lightfast.bag.writer.BagWriter` write) are read chunk by
+chunk with :mod:`lightfast.bag.mcap_chunks`, which checks every chunk (CRC, decompression, record structure against
+the indexes) before using its messages. A corrupt chunk raises :class:`~lightfast.bag.errors.CorruptChunkError`,
+or, with ``messages(skipped=SkippedChunks())``, is skipped and counted. Other storage (sqlite3, rosbag2's file or
+message compression, MCAP files without a chunk index) is read by rosbags.
 """
 from __future__ import annotations
 
 import logging
 import os
+import struct
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -19,7 +26,8 @@ from rosbags.interfaces import Connection, Qos
 from rosbags.rosbag2 import Reader
 from rosbags.rosbag2.errors import ReaderError
 
-from lightfast.bag.errors import BagError, BagFormatError, BagNotFoundError, UnknownMessageTypeError
+from lightfast.bag.errors import BagError, BagFormatError, BagNotFoundError, CorruptChunkError, UnknownMessageTypeError
+from lightfast.bag.mcap_chunks import ChunkCheckError, CorruptChunk, McapIndex, SkippedChunks, iter_messages, read_index
 
 log = logging.getLogger(__name__)
 
@@ -48,6 +56,8 @@ class BagInfo:
     message_count: int
     size_bytes: int
     topics: tuple[TopicInfo, ...]
+    compression: str = "none"  # "none", "zstd", "lz4" (several: "lz4, zstd"), "unknown" (MCAP without chunk index)
+    compression_mode: str = ""  # "chunks" (MCAP chunk compression), "file" or "message" (rosbag2's modes)
 
     @property
     def duration_ns(self) -> int:
@@ -66,6 +76,7 @@ class BagInfo:
             f"Files:             {self.path}",
             f"Storage:           {self.storage}" + (f" (rosbag2 version {self.version})" if self.version else ""),
             f"Bag size:          {_human_size(self.size_bytes)}",
+            f"Compression:       {self.compression}" + (f" ({self.compression_mode})" if self.compression_mode else ""),
             f"Duration:          {duration_s:.3f} s",
             f"Start:             {self.start_ns * 1e-9:.9f}",
             f"End:               {self.end_ns * 1e-9:.9f}",
@@ -130,9 +141,37 @@ class BagReader:
             self._reader.open()
         except BagError:
             raise
-        except (ReaderError, OSError, KeyError, ValueError, IndexError, EOFError) as exc:
-            raise BagFormatError(f"{self.path}: cannot read bag: {_reason(exc)}") from None
+        except (ReaderError, OSError, KeyError, ValueError, IndexError, EOFError, OverflowError, struct.error) as exc:
+            raise BagFormatError(f"{self.path}: cannot read bag: {_truncation(self.path) or _reason(exc)}") from None
+        self._meta = _metadata(self.path)
+        self._mcap = self._read_mcap_indexes()
         self._info = self._make_info()
+
+    def _storage_files(self) -> list[Path]:
+        if self.path.is_file():
+            return [self.path]
+        names = self._meta.get("relative_file_paths") or []
+        return [self.path / Path(str(n)).name for n in names]
+
+    def _read_mcap_indexes(self) -> list[McapIndex] | None:
+        """The chunk indexes of the bag's MCAP files, or None if rosbags has to read the bag (sqlite3, rosbag2's
+        file or message compression, an MCAP file without chunk index)."""
+        if str(self._meta.get("compression_mode") or "").lower() not in ("", "none"):
+            return None
+        files = self._storage_files()
+        if not files or any(f.suffix != ".mcap" for f in files):
+            return None
+        indexes = []
+        for f in files:
+            try:
+                index = read_index(f)
+            except ChunkCheckError as exc:
+                log.warning("%s; reading it with rosbags", exc)
+                return None
+            if index is None:
+                return None
+            indexes.append(index)
+        return indexes
 
     def _make_info(self) -> BagInfo:
         r = self._reader
@@ -161,10 +200,19 @@ class BagReader:
         version = None
         storage = self.path.suffix.lstrip(".") or "mcap"
         if self.path.is_dir():
-            meta = yaml.safe_load((self.path / "metadata.yaml").read_text()) or {}
-            version = meta.get("rosbag2_bagfile_information", {}).get("version")
+            version = self._meta.get("version")
             storage = next((p.suffix.lstrip(".") for p in files if p.suffix in (".mcap", ".db3")), storage)
         storage = {"db3": "sqlite3"}.get(storage, storage)
+        compression, compression_mode = "none", ""
+        mode = str(self._meta.get("compression_mode") or "").lower()
+        if mode not in ("", "none"):
+            compression, compression_mode = str(self._meta.get("compression_format") or "?"), mode
+        elif self._mcap is not None:
+            kinds = sorted(set().union(*(i.compressions for i in self._mcap)) - {""})
+            if kinds:
+                compression, compression_mode = ", ".join(kinds), "chunks"
+        elif storage == "mcap":
+            compression = "unknown"  # no chunk index to tell (rosbags reads such a file by scanning it)
         count = r.message_count
         return BagInfo(
             path=self.path,
@@ -175,6 +223,8 @@ class BagReader:
             message_count=count,
             size_bytes=sum(p.stat().st_size for p in files),
             topics=tuple(sorted(topics, key=lambda t: t.name)),
+            compression=compression,
+            compression_mode=compression_mode,
         )
 
     @property
@@ -198,17 +248,47 @@ class BagReader:
         topics: Iterable[str] | None = None,
         start_ns: int | None = None,
         stop_ns: int | None = None,
+        skipped: SkippedChunks | None = None,
     ) -> Iterator[BagMessage]:
         """Serialized messages of ``topics`` (default all) with ``start_ns <= log time < stop_ns``, in log-time
-        order."""
+        order.
+
+        A corrupt MCAP chunk raises :class:`~lightfast.bag.errors.CorruptChunkError`; with ``skipped`` given, its
+        messages are skipped instead and the chunk is recorded there (the read goes on with the next chunk)."""
         names = set(self.select_topics(topics))
+        if self._mcap is None:
+            yield from self._rosbags_messages(names, start_ns, stop_ns)
+            return
+        types = {t.name: t.msgtype for t in self._info.topics}
+
+        def on_corrupt(chunk: CorruptChunk) -> None:
+            if skipped is None:
+                raise CorruptChunkError(f"{self.path}: corrupt {chunk.describe()}", chunk)
+            if skipped.add(chunk):
+                log.info("%s: skipping corrupt %s", self.path, chunk.describe())
+
+        start = 0 if start_ns is None else start_ns
+        stop = 2**64 if stop_ns is None else stop_ns
+        for index in self._mcap:
+            channels = {cid for cid, (topic, _) in index.channels.items() if topic in names}
+            if not channels:
+                continue
+            try:
+                for t_ns, cid, data in iter_messages(index, channels, start, stop, on_corrupt):
+                    topic, msgtype = index.channels[cid]
+                    yield BagMessage(topic, types.get(topic, msgtype), t_ns, data)
+            except OSError as exc:
+                raise BagFormatError(f"{index.path}: cannot read: {_reason(exc)}") from None
+
+    def _rosbags_messages(self, names: set[str], start_ns: int | None, stop_ns: int | None) -> Iterator[BagMessage]:
         conns = [c for c in self._reader.connections if c.topic in names]
         if not conns:
             return
         try:
             for conn, t_ns, data in self._reader.messages(connections=conns, start=start_ns, stop=stop_ns):
                 yield BagMessage(conn.topic, conn.msgtype, t_ns, bytes(data))
-        except (ReaderError, OSError, KeyError, ValueError, IndexError, EOFError, AssertionError) as exc:
+        except (ReaderError, OSError, KeyError, ValueError, IndexError, EOFError, AssertionError, OverflowError,
+                struct.error) as exc:
             raise BagFormatError(f"{self.path}: bag is damaged or truncated: {_reason(exc)}") from None
 
     def deserialize(self, message: BagMessage) -> Any:
@@ -241,6 +321,35 @@ class BagReader:
 def _reason(exc: BaseException) -> str:
     text = str(exc).strip() or type(exc).__name__
     return text.splitlines()[0]
+
+
+def _metadata(path: Path) -> dict[str, Any]:
+    """``rosbag2_bagfile_information`` of a bag directory's metadata.yaml ({} for a bare storage file)."""
+    if not path.is_dir():
+        return {}
+    try:
+        meta = yaml.safe_load((path / "metadata.yaml").read_text()) or {}
+    except (OSError, yaml.YAMLError) as exc:
+        raise BagFormatError(f"{path}: cannot read metadata.yaml: {_reason(exc)}") from None
+    info = meta.get("rosbag2_bagfile_information") if isinstance(meta, dict) else None
+    return info if isinstance(info, dict) else {}
+
+
+def _truncation(path: Path) -> str | None:
+    """A reason if an MCAP file of the bag does not end with the MCAP magic (a cut-off file), else None."""
+    files = [path] if path.is_file() else sorted(path.glob("*.mcap"))
+    for f in files:
+        try:
+            with f.open("rb") as fh:
+                size = fh.seek(0, os.SEEK_END)
+                fh.seek(max(0, size - 8))
+                tail = fh.read(8)
+        except OSError:
+            continue
+        if size >= 8 and tail != b"\x89MCAP0\r\n":
+            return (f"{f.name} is truncated or its end is damaged (no MCAP footer after {size} bytes; "
+                    "was its writer killed?)")
+    return None
 
 
 def open_bag(path: str | os.PathLike[str]) -> BagReader:

@@ -2,7 +2,9 @@
 
 The bag is built under a hidden temporary directory beside the target and moved into place by :meth:`close`, so
 a reader never sees a half-written bag at the target path. The MCAP file embeds each topic's message definition,
-so ``ros2 bag``, Foxglove, rosbags and ``mcap`` can all read it.
+so ``ros2 bag``, Foxglove, rosbags and ``mcap`` can all read it. MCAP files are written through
+:class:`~lightfast.bag.mcap_storage.McapStorage`: every chunk carries a CRC, and ``compression="zstd"`` or ``"lz4"``
+compresses the chunks (rosbag2's MCAP chunk compression; the file stays readable by any MCAP reader).
 """
 from __future__ import annotations
 
@@ -22,6 +24,7 @@ from rosbags.typesys import Stores, get_typestore
 from rosbags.typesys.store import Typestore
 
 from lightfast.bag.errors import BagError, BagExistsError, UnknownMessageTypeError
+from lightfast.bag.mcap_storage import COMPRESSIONS, McapStorage
 
 ROSBAG2_VERSION = 9  # the metadata version of ROS 2 Jazzy's rosbag2
 STORAGES = {"mcap": StoragePlugin.MCAP, "sqlite3": StoragePlugin.SQLITE3}
@@ -56,6 +59,7 @@ class BagWriter:
 
     ``with BagWriter(path) as bag: bag.add_topic(...); bag.write(...)`` — on a clean exit the bag is closed and
     moved into place; on an exception it is discarded (call :meth:`close` yourself to keep what was written).
+    ``compression`` (``"none"``, ``"zstd"``, ``"lz4"``; MCAP storage only) compresses the MCAP file's chunks.
     """
 
     def __init__(
@@ -65,19 +69,36 @@ class BagWriter:
         storage: str = "mcap",
         overwrite: bool = False,
         typestore: Typestore | None = None,
+        compression: str = "none",
     ) -> None:
         self.path = Path(path)
         if storage not in STORAGES:
             raise BagError(f"unknown storage {storage!r}; choose one of {sorted(STORAGES)}")
+        if compression not in COMPRESSIONS:
+            raise BagError(f"unknown compression {compression!r}; choose one of {', '.join(COMPRESSIONS)}")
+        if compression != "none" and storage != "mcap":
+            raise BagError(f"compression {compression} needs mcap storage ({storage} has no chunk compression)")
         if self.path.exists() and not overwrite:
             raise BagExistsError(f"{self.path} exists already (choose another path or allow overwriting)")
         self.storage = storage
+        self.compression = compression
         self.overwrite = overwrite
         self.typestore = typestore or default_typestore()
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._tmp = Path(tempfile.mkdtemp(prefix=f".{self.path.name}.", suffix=".partial", dir=self.path.parent))
         self._writer = Writer(self._tmp / self.path.name, version=ROSBAG2_VERSION, storage_plugin=STORAGES[storage])
-        self._writer.open()
+        if storage == "mcap":
+            # rosbags' Writer keeps its front end (connections, QoS, metadata.yaml); the MCAP file comes from
+            # McapStorage (chunk CRCs, chunk compression). The plugin table is looked up per instance at open().
+            self._writer.STORAGE_PLUGINS = {  # type: ignore[assignment]
+                **Writer.STORAGE_PLUGINS,
+                StoragePlugin.MCAP: functools.partial(McapStorage, compression=compression),
+            }
+        try:
+            self._writer.open()
+        except Exception:
+            shutil.rmtree(self._tmp, ignore_errors=True)
+            raise
         self._connections: dict[str, Connection] = {}
         self.counts: dict[str, int] = {}
         self._closed = False

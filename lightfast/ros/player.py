@@ -4,6 +4,10 @@ Library first: :func:`play_bag` publishes from an existing node (so tests can ru
 ``lightfast bag play`` wraps it. The player is paced by the bag's log times scaled by ``rate`` (``0`` = as fast as
 possible), can wait for subscribers before the first message, and at the end waits until reliable subscribers
 acknowledged everything, so a fast replay still loses nothing.
+
+A corrupt chunk of an MCAP bag (see :mod:`lightfast.bag.mcap_chunks`) does not end the replay: its messages are
+skipped, the rest is played, and the report counts what was skipped (:attr:`PlayReport.corrupt_chunks`); the
+caller decides whether an incomplete replay is a failure (``lightfast bag play`` exits 5 unless --skip-corrupt).
 """
 from __future__ import annotations
 
@@ -21,6 +25,7 @@ from rclpy.qos import ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 
 from lightfast.bag.errors import BagError
+from lightfast.bag.mcap_chunks import CorruptChunk, SkippedChunks, describe_skipped
 from lightfast.bag.reader import BagReader, open_bag
 from lightfast.config import Config, param
 from lightfast.ros.convert import ns_to_stamp
@@ -56,7 +61,8 @@ class PlayOptions(Config):
 class PlayReport:
     """What a replay did. ``wall_duration_s`` and ``cpu_s`` (the CPU time of the player's process, all threads) count
     from the first message on: the wait for subscribers and the clock preroll are not in them. ``realtime_factor`` is
-    bag time played over that wall time."""
+    bag time played over that wall time. ``corrupt_chunks`` are the bag's chunks that failed their checks and were
+    skipped (each counted once, also when looping)."""
 
     published: dict[str, int]
     bag_duration_s: float
@@ -65,10 +71,25 @@ class PlayReport:
     acknowledged: bool
     interrupted: bool
     cpu_s: float = 0.0
+    corrupt_chunks: tuple[CorruptChunk, ...] = ()
 
     @property
     def message_count(self) -> int:
         return sum(self.published.values())
+
+    @property
+    def skipped_messages(self) -> int:
+        """Messages of the played topics lost in corrupt chunks (a lower bound if a chunk's count is unknown)."""
+        return sum(c.message_count or 0 for c in self.corrupt_chunks)
+
+    @property
+    def complete(self) -> bool:
+        """No corrupt chunk was skipped."""
+        return not self.corrupt_chunks
+
+    def skipped_summary(self) -> str:
+        """``skipped 5 messages in 1 corrupt chunk`` ('' if nothing was skipped)."""
+        return describe_skipped(self.corrupt_chunks) if self.corrupt_chunks else ""
 
     @property
     def realtime_factor(self) -> float:
@@ -78,9 +99,10 @@ class PlayReport:
         rate = f"{self.realtime_factor:.2f}x real time" if self.wall_duration_s > 0 else "instant"
         flags = "" if self.acknowledged else ", NOT all acknowledged"
         flags += ", interrupted" if self.interrupted else ""
+        skipped = f", {self.skipped_summary()}" if self.corrupt_chunks else ""
         return (
             f"played {self.message_count} messages on {len(self.published)} topics, {self.bag_duration_s:.2f} s of "
-            f"bag in {self.wall_duration_s:.2f} s ({rate}{flags}), {self.cpu_s:.2f} s CPU"
+            f"bag in {self.wall_duration_s:.2f} s ({rate}{flags}), {self.cpu_s:.2f} s CPU{skipped}"
         )
 
 
@@ -156,6 +178,7 @@ def _play(reader: BagReader, node: Node, options: PlayOptions, stop: threading.E
 
     start_ns = info.start_ns + int(options.start_offset_s * 1e9)
     published: Counter[str] = Counter({t: 0 for t in topics})
+    skipped = SkippedChunks()
     loops = 0
     bag_time_played_ns = 0
     wall_start: float | None = None  # wall and CPU time from the first message on
@@ -165,7 +188,7 @@ def _play(reader: BagReader, node: Node, options: PlayOptions, stop: threading.E
         first_ns: int | None = None
         last_ns = start_ns
         wall0 = time.monotonic()
-        for msg in reader.messages(topics=topics, start_ns=start_ns):
+        for msg in reader.messages(topics=topics, start_ns=start_ns, skipped=skipped):
             if first_ns is None:
                 first_ns = msg.log_time_ns
                 if loops == 1 and options.preroll_s > 0 and clock.publisher is not None:
@@ -214,4 +237,5 @@ def _play(reader: BagReader, node: Node, options: PlayOptions, stop: threading.E
         acknowledged=acknowledged,
         interrupted=stop.is_set(),
         cpu_s=cpu_s,
+        corrupt_chunks=tuple(skipped.chunks.values()),
     )

@@ -6,7 +6,8 @@ SIGTERM closes a valid bag holding every message the subscriptions had delivered
 
 Topics are discovered from the ROS graph periodically; a topic's subscription QoS adapts to its publishers
 (reliable and KEEP_ALL when they are all reliable, transient-local when they all are). Each message's log time is
-the node clock's time at reception (ROS time, so ``use_sim_time`` makes it bag time).
+the node clock's time at reception (ROS time, so ``use_sim_time`` makes it bag time). The writer's chunk
+compression (``BagWriter(..., compression="zstd")``) applies as written; the report states it and the bag's size.
 """
 from __future__ import annotations
 
@@ -47,6 +48,8 @@ class TopicStats:
 class RecordReport:
     path: Path
     topics: dict[str, TopicStats] = field(default_factory=dict)
+    compression: str = "none"
+    size_bytes: int | None = None  # of the finished bag (set by BagRecorder.close)
 
     @property
     def message_count(self) -> int:
@@ -54,9 +57,10 @@ class RecordReport:
 
     def summary(self) -> str:
         parts = [f"{name} {s.count} @ {s.rate_hz:.1f} Hz" for name, s in sorted(self.topics.items())]
-        return f"recorded {self.message_count} messages on {len(self.topics)} topics to {self.path}: " + "; ".join(
-            parts
-        )
+        details = [f"{self.size_bytes / 1e6:.1f} MB"] if self.size_bytes is not None else []
+        details += [f"{self.compression} chunks"] if self.compression != "none" else []
+        where = f"{self.path}" + (f" ({', '.join(details)})" if details else "")
+        return f"recorded {self.message_count} messages on {len(self.topics)} topics to {where}: " + "; ".join(parts)
 
 
 def _load_msgdef(msgtype: str) -> str:
@@ -93,7 +97,7 @@ class BagRecorder:
         self.topics = None if topics is None else tuple(dict.fromkeys(topics))
         self.exclude = set(exclude)
         self.on_message = on_message
-        self.report = RecordReport(path=writer.path)
+        self.report = RecordReport(path=writer.path, compression=writer.compression)
         self._subscriptions: dict[str, Subscription] = {}
         self._skipped: set[str] = set()
         self._closed = False
@@ -161,6 +165,8 @@ class BagRecorder:
             for sub in self._subscriptions.values():
                 self.node.destroy_subscription(sub)
             self.report.path = self.writer.close()
+            files = [self.report.path] if self.report.path.is_file() else list(self.report.path.iterdir())
+            self.report.size_bytes = sum(p.stat().st_size for p in files if p.is_file())
         return self.report
 
 
