@@ -1,7 +1,8 @@
 """``vtr_localizer_node``: colour-constant stereo visual teach & repeat (paper: Paton et al., ICRA 2015, §IV-B, IV-C)
 on a rectified stereo stream, with the ROS-free pipelines of :mod:`lightfast.vtr`.
 
-Inputs: ``/stereo/left/image_raw`` and ``/stereo/right/image_raw`` (rgb8, *rectified*; paired by exact stamp, either
+Inputs: ``/stereo/left/image_raw`` and ``/stereo/right/image_raw`` (colour: rgb8, bgr8, rgba8 or bgra8, *rectified*;
+best-effort subscriptions unless ``sensor_reliability`` asks otherwise; paired by exact stamp, either
 may come first) and ``/stereo/{left,right}/camera_info`` (the newest of each is used; only the rectified projection
 matrices ``P`` and the image size matter: images must already be rectified, so ``D``/``K``/``R`` are ignored).
 A pair that comes before the first ``camera_info`` of both cameras waits for it up to ``CAMERA_INFO_WAIT_S``.
@@ -25,14 +26,16 @@ Outputs, per processed stereo pair and stamped with it:
 
 * ``/vtr/localization`` (``geometry_msgs/PoseWithCovarianceStamped``, repeat only, from the first localization on):
   the pose of the left camera relative to the taught path, i.e. in the frame of the nearest keyframe along the
-  path, ``frame_id = vtr_keyframe_<index>`` (that keyframe's left optical frame). On a localized pair the
+  path, ``frame_id = vtr_keyframe_<index>`` (``keyframe_frame_prefix``; that keyframe's left optical frame). On a localized pair the
   covariance is the localization's (nominal 1 px noise), turned from the camera-frame perturbation of the core
   (ξ = (ρ, φ) in ``T·exp(ξ)``) into position and rotation perturbations in the keyframe frame (J = diag(R, R)); on
   a pair carried by VO alone (the paper: "the VO estimate is used as the final pose estimate if localization
   fails") it is diagonal, growing with the distance on VO (``vo_drift_m_per_m``, ``vo_drift_deg_per_m``).
 * ``/vtr/odometry`` (``nav_msgs/Odometry``, teach and repeat): the greyscale VO chained from the first pair
-  processed, ``frame_id = vtr_odom`` → ``child_frame_id`` = the left image's frame; twist from the last VO step
+  processed, ``frame_id = vtr_odom`` (``odom_frame``) → ``child_frame_id`` = the left image's frame; twist from the last VO step
   (child frame); covariances zero (unknown).
+* ``/tf`` (``publish_tf``): ``odom_frame`` → left camera (the VO chain) and left camera → ``vtr_keyframe_<index>``
+  (the inverse of the localization), so the camera keeps one parent and RViz shows the localized keyframe.
 * ``/vtr/status`` (``diagnostic_msgs/DiagnosticArray``): per pair (``stamp_ns``) whether it localized, the
   keyframe id, inliers and matches per source, distance on VO, failure / relocalized / whole-map search, VO
   inliers, distance along the path, stage timings in ms; in a teach the keyframe id, new keyframe, keyframes and
@@ -41,9 +44,13 @@ Outputs, per processed stereo pair and stamped with it:
 * ``/vtr/color_constant/fv`` and ``/vtr/color_constant/fr`` (``sensor_msgs/Image`` mono8): the 8-bit F_v and F_r
   images of the left camera, computed only while someone subscribes (``publish_images``).
 
-Bad input — a non-rgb8 image, missing or unusable camera_info, left and right (or image and camera_info) sizes
+Bad input — an image not in colour, missing or unusable camera_info, left and right (or image and camera_info) sizes
 that differ, a black pair (mean below ``black_level``), a camera other than the map's — is reported on
 ``/vtr/status`` and in a throttled log line, and the pair is skipped; the node keeps running.
+
+Time going back (ROS time, or the pairs' stamps, by more than ``time_jump_back_s``: a bag played again) restarts a
+repeat (VO at its origin, a whole-map search); a teach refuses such pairs. Pairs stamped more than
+``max_stamp_ahead_s`` ahead of the node's clock are refused.
 
 Threading as in the other nodes: the subscription callbacks only convert and buffer; the pipelines run in a
 guard-condition callback of their own mutually exclusive callback group (one pair per call), which the finish
@@ -72,10 +79,11 @@ from std_srvs.srv import Trigger
 
 from lightfast.config import ConfigError
 from lightfast.errors import LightfastError
-from lightfast.geometry import so3_log
+from lightfast.geometry import inverse, so3_log
+from lightfast.ros.clock import on_time_jump_back
 from lightfast.ros.convert import (
     ConversionError,
-    image_to_numpy,
+    image_to_rgb,
     make_header,
     matrix_to_odometry,
     matrix_to_pose,
@@ -84,10 +92,12 @@ from lightfast.ros.convert import (
 )
 from lightfast.ros.diagnostics import Level, ProblemLog, diagnostic_array, diagnostic_status, log_at
 from lightfast.ros.params import ConfigParameters
-from lightfast.ros.qos import OUTPUT_QOS
+from lightfast.ros.qos import OUTPUT_QOS, sensor_qos
 from lightfast.ros.ready import announce_ready
 from lightfast.ros.runtime import run_node
 from lightfast.ros.sync import ExactTimePairs
+from lightfast.ros.tf import TransformBroadcaster, transform_stamped
+from lightfast.stamps import StampGuard, StampVerdict
 from lightfast.topics import (
     STEREO_LEFT_FRAME,
     STEREO_LEFT_IMAGE_TOPIC,
@@ -97,9 +107,7 @@ from lightfast.topics import (
     VTR_FINISH_TEACH_SERVICE,
     VTR_FR_TOPIC,
     VTR_FV_TOPIC,
-    VTR_KEYFRAME_FRAME_PREFIX,
     VTR_LOCALIZATION_TOPIC,
-    VTR_ODOM_FRAME,
     VTR_ODOMETRY_TOPIC,
     VTR_STATUS_TOPIC,
 )
@@ -124,12 +132,6 @@ CAMERA_INFO_WAIT_S = 1.0
 MIN_IMAGE_PX = 16
 _SIDES = {"left": (STEREO_LEFT_IMAGE_TOPIC, STEREO_LEFT_INFO_TOPIC),
           "right": (STEREO_RIGHT_IMAGE_TOPIC, STEREO_RIGHT_INFO_TOPIC)}
-
-
-def rgb8_to_numpy(msg: Image) -> np.ndarray:
-    if msg.encoding != "rgb8":
-        raise ConversionError(f"image encoding {msg.encoding!r} is not supported (need rgb8 colour images)")
-    return image_to_numpy(msg)
 
 
 @dataclass(frozen=True)
@@ -199,8 +201,10 @@ class VtrLocalizerNode(Node):
         self._info: dict[str, StereoInfo] = {}
         self._T_odom_cam = np.eye(4)
         self._last_stamp_ns: int | None = None
+        self._guard = StampGuard(cfg)  # stamps of the stereo pairs (worker only)
+        self._clock_jump: int | None = None  # the node clock after it jumped back, until the worker sees it
         self.stats = {"frames_in": 0, "frames_done": 0, "dropped_behind": 0, "dropped_unpaired": 0, "bad_inputs": 0,
-                      "ignored": 0}
+                      "ignored": 0, "time_jumps": 0}
         self._status: tuple[Level, str] = (Level.OK, "waiting for stereo pairs")
 
         inputs = MutuallyExclusiveCallbackGroup()
@@ -210,11 +214,14 @@ class VtrLocalizerNode(Node):
         self.status_pub = self.create_publisher(DiagnosticArray, VTR_STATUS_TOPIC, OUTPUT_QOS)
         self.image_pubs = {"fv": self.create_publisher(Image, VTR_FV_TOPIC, OUTPUT_QOS),
                            "fr": self.create_publisher(Image, VTR_FR_TOPIC, OUTPUT_QOS)}
+        self.tf = TransformBroadcaster(self) if cfg.publish_tf else None
+        sensor = sensor_qos(cfg)
         for side, (image_topic, info_topic) in _SIDES.items():
-            self.create_subscription(Image, image_topic, lambda m, s=side: self._on_image(m, s), OUTPUT_QOS,
+            self.create_subscription(Image, image_topic, lambda m, s=side: self._on_image(m, s), sensor,
                                      callback_group=inputs)
-            self.create_subscription(CameraInfo, info_topic, lambda m, s=side: self._on_info(m, s), OUTPUT_QOS,
+            self.create_subscription(CameraInfo, info_topic, lambda m, s=side: self._on_info(m, s), sensor,
                                      callback_group=inputs)
+        self._jump_handle = on_time_jump_back(self, cfg.time_jump_back_s, self._on_clock_jump)
         self.work_trigger = self.create_guard_condition(self._work, callback_group=work)
         self.finish_service = self.create_service(Trigger, VTR_FINISH_TEACH_SERVICE, self._on_finish,
                                                   callback_group=work)
@@ -304,7 +311,7 @@ class VtrLocalizerNode(Node):
     def _on_image(self, msg: Image, side: str) -> None:
         topic = _SIDES[side][0]
         try:
-            stamp, rgb = stamp_to_ns(msg.header.stamp), rgb8_to_numpy(msg)
+            stamp, rgb = stamp_to_ns(msg.header.stamp), image_to_rgb(msg)  # colour: the colour-constant images
         except ConversionError as exc:
             self._problem(f"{side}_image", f"dropped {side} image on {topic}: {exc}")
             return
@@ -338,7 +345,46 @@ class VtrLocalizerNode(Node):
 
     # ---------------------------------------------------------------------------------------------- worker
 
+    def _on_clock_jump(self, now_ns: int, jump_ns: int) -> None:
+        with self._lock:
+            self._clock_jump = now_ns
+        self.work_trigger.trigger()
+
+    def _stamp_ok(self, f: _Frame) -> bool:
+        """Refuse a pair stamped ahead of the clock or out of order; when the stamps went back, a repeat starts
+        over (a teach refuses pairs from before its newest: it would teach the route twice)."""
+        now = self.get_clock().now().nanoseconds
+        verdict = self._guard.check(f.stamp_ns, now)
+        if verdict is StampVerdict.JUMPED_BACK and self.teach is None:
+            self._time_jumped(f"stereo pair stamps went back {(self._guard.last_ns - f.stamp_ns) * 1e-9:.3f} s")
+        elif verdict is StampVerdict.JUMPED_BACK:
+            self._problem("stamp", f"stereo pair {f.stamp_ns} ignored: the stamps went back during a teach (a bag "
+                          f"played again?); finish the teach with {VTR_FINISH_TEACH_SERVICE} or restart the node",
+                          stamp_ns=f.stamp_ns)
+            return False
+        elif verdict is not StampVerdict.OK:
+            self._problem("stamp", f"stereo pair {f.stamp_ns}: {self._guard.describe(verdict, f.stamp_ns, now)}",
+                          stamp_ns=f.stamp_ns)
+            return False
+        self._guard.accept(f.stamp_ns)
+        return True
+
+    def _time_jumped(self, why: str) -> None:
+        """Time went back in a repeat: the VO chain and the localization prior start over (a whole-map search)."""
+        self.stats["time_jumps"] += 1
+        self._guard.reset()
+        self._T_odom_cam = np.eye(4)
+        self._last_stamp_ns = None
+        if self.repeat is not None:
+            self.repeat = RepeatPipeline(self.repeat.map, self.config.repeat_config())
+        self.get_logger().warning(f"{why} (a bag played again, or looped?): the repeat starts over with a search of "
+                                  "the whole map, the VO chain at its origin")
+
     def _work(self) -> None:
+        with self._lock:
+            clock_jump, self._clock_jump = self._clock_jump, None
+        if clock_jump is not None and self.teach is None and self._guard.clock_jumped_back(clock_jump):
+            self._time_jumped(f"ROS time jumped back to {clock_jump * 1e-9:.3f} s")
         with self._lock:
             self.config = self.params.config
             frame = self._frames.popleft() if self._frames else None
@@ -415,7 +461,7 @@ class VtrLocalizerNode(Node):
                           count=False)
             return
         P = self._check_frame(f)
-        if P is None:
+        if P is None or not self._stamp_ok(f):
             return
         if self.teach is not None:
             self._teach_step(f, *P)
@@ -569,11 +615,15 @@ class VtrLocalizerNode(Node):
             var_p = (self.config.vo_drift_m_per_m * d) ** 2 + 1e-6
             var_r = math.radians(self.config.vo_drift_deg_per_m * d) ** 2 + 1e-8
             cov = np.diag([var_p] * 3 + [var_r] * 3)
+        keyframe_frame = f"{self.config.keyframe_frame_prefix}{r.keyframe_index}"
         msg = PoseWithCovarianceStamped()
-        msg.header = make_header(f.stamp_ns, f"{VTR_KEYFRAME_FRAME_PREFIX}{r.keyframe_index}")
+        msg.header = make_header(f.stamp_ns, keyframe_frame)
         msg.pose.pose = matrix_to_pose(T)
         msg.pose.covariance = [float(x) for x in cov.reshape(-1)]
         self.localization_pub.publish(msg)
+        if self.tf is not None:  # the keyframe as a child of the camera: the camera has one parent, odom_frame
+            self.tf.send(transform_stamped(inverse(T), stamp_ns=f.stamp_ns, parent_frame=f.frame_id,
+                                           child_frame=keyframe_frame))
 
     # ---------------------------------------------------------------------------------------------- both
 
@@ -586,9 +636,12 @@ class VtrLocalizerNode(Node):
             R, t = T_prev_cur[:3, :3], T_prev_cur[:3, 3]
             linear = R.T @ t / dt  # velocity of the current camera, in its own frame
             angular = np.asarray(so3_log(R), dtype=np.float64) / dt
-        self.odom_pub.publish(matrix_to_odometry(self._T_odom_cam, stamp_ns=f.stamp_ns, frame_id=VTR_ODOM_FRAME,
-                                                 child_frame_id=f.frame_id, twist_linear=linear,
-                                                 twist_angular=angular))
+        self.odom_pub.publish(matrix_to_odometry(self._T_odom_cam, stamp_ns=f.stamp_ns,
+                                                 frame_id=self.config.odom_frame, child_frame_id=f.frame_id,
+                                                 twist_linear=linear, twist_angular=angular))
+        if self.tf is not None:
+            self.tf.send(transform_stamped(self._T_odom_cam, stamp_ns=f.stamp_ns,
+                                           parent_frame=self.config.odom_frame, child_frame=f.frame_id))
 
     def _publish_images(self, f: _Frame, color: ColorConstantConfig) -> None:
         if not self.config.publish_images:

@@ -13,7 +13,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from lightfast.config import Config, ConfigError, param
+from lightfast.config import ConfigError, param
+from lightfast.node_options import SensorInputOptions, StampOptions
 from lightfast.vtr.color_constant import SOURCES
 from lightfast.vtr.repeat import MODES, RepeatConfig
 from lightfast.vtr.stereo import FEATURE_TYPES, STEREO_MATCHING, StereoConfig
@@ -26,7 +27,7 @@ PHASES = ("teach", "repeat")
 
 
 @dataclass(frozen=True)
-class VtrLocalizerConfig(Config):
+class VtrLocalizerConfig(SensorInputOptions, StampOptions):
     """Parameters of ``vtr_localizer_node`` (module docstring)."""
 
     mode: str = param("repeat", description="teach: build a map at map_path from the stereo stream (finish it with "
@@ -37,6 +38,13 @@ class VtrLocalizerConfig(Config):
     overwrite_map: bool = param(False, description="Teach: replace a map at map_path when the teach finishes (the "
                                 "previous map stays untouched until then); false refuses to start over one.",
                                 read_only=True)
+    odom_frame: str = param("vtr_odom", description="Frame of the VO chain (/vtr/odometry, and the parent of the "
+                            "left camera on /tf): the left camera of the first stereo pair.", read_only=True)
+    keyframe_frame_prefix: str = param("vtr_keyframe_", description="Frame of a taught keyframe: this prefix and "
+                                       "the keyframe's index (/vtr/localization's frame_id; on /tf a child of the "
+                                       "left camera).", read_only=True)
+    publish_tf: bool = param(True, description="Broadcast odom_frame -> left camera and left camera -> the "
+                             "keyframe localized against, on /tf.", read_only=True)
     # teach ----------------------------------------------------------------------------------------------------
     keyframe_distance_m: float = param(1.0, description="Teach: a new keyframe when the camera has moved this far "
                                        "from the last keyframe, m.", min=0.01, max=1000.0, read_only=True)
