@@ -228,8 +228,8 @@ def load_config_yaml(cls: type[C], path: str | os.PathLike[str], *, node_name: s
         data = yaml.safe_load(path.read_text())
     except FileNotFoundError:
         raise ConfigError(f"no parameter file at {path}") from None
-    except yaml.YAMLError as exc:
-        raise ConfigError(f"{path} is not valid YAML: {exc}") from None
+    except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
+        raise ConfigError(f"{path} is not valid YAML: {' '.join(str(exc).split())}") from None
     if not isinstance(data, dict):
         raise ConfigError(f"{path}: expected a mapping with a '/**' or node section")
     section = None

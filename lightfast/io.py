@@ -1,15 +1,24 @@
-"""Atomic file output: readers never see a half-written file, a crash leaves the previous version intact."""
+"""Atomic file output: readers never see a half-written file, a crash leaves the previous version intact. And the
+readers' side: damaged or foreign files give the loader's own error with the reason, never a traceback."""
 from __future__ import annotations
 
+import io
+import json
 import os
 import shutil
 import tempfile
+import zipfile
+import zlib
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import yaml
+
+#: What numpy and zipfile raise on a truncated, garbled or foreign .npz file.
+NPZ_ERRORS = (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile, zlib.error)
 
 
 def _umask() -> int:
@@ -81,10 +90,34 @@ def read_versioned_yaml(path: str | os.PathLike[str], *, format_name: str, versi
     path = Path(path)
     try:
         doc = yaml.safe_load(path.read_text())
-    except (OSError, yaml.YAMLError) as exc:
-        raise error(f"{path}: cannot read {what} ({exc})") from None
+    except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
+        raise error(f"{path}: {what} is unreadable ({exc})") from None
     if not isinstance(doc, dict) or doc.get("format") != format_name:
         raise error(f"{path} is not {what} (expected format: {format_name})")
     if doc.get(version_key) != version:
         raise error(f"{path}: {what} {version_key} {doc.get(version_key)} is not supported (reads {version})")
+    return doc
+
+
+def load_npz(path: str | os.PathLike[str], *, error: type[Exception], what: str,
+             data: bytes | None = None) -> dict[str, np.ndarray]:
+    """Every array of an ``.npz`` file (``allow_pickle=False``), read at once; ``data`` reads those bytes instead of
+    the file. Raises ``error`` naming ``what`` and the file when it is missing, truncated or not an npz file."""
+    try:
+        source = io.BytesIO(data) if data is not None else Path(path)
+        with np.load(source, allow_pickle=False) as npz:
+            return {k: npz[k] for k in npz.files}
+    except NPZ_ERRORS as exc:
+        raise error(f"{path}: {what} is damaged or truncated, or not an npz file ({type(exc).__name__}: {exc})") from None
+
+
+def read_json_mapping(path: str | os.PathLike[str], *, error: type[Exception], what: str) -> dict[str, Any]:
+    """A JSON file holding an object (a ``dict``); ``error`` naming ``what`` when it cannot be read or parsed, or
+    holds anything else."""
+    try:
+        doc = json.loads(Path(path).read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise error(f"{path}: {what} is unreadable ({exc})") from None
+    if not isinstance(doc, dict):
+        raise error(f"{path}: {what} must be a JSON object, got {type(doc).__name__}")
     return doc

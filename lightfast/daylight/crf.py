@@ -297,6 +297,8 @@ def load_crf(path: str | os.PathLike[str]) -> CameraResponse:
         text = path.read_text()
     except OSError as exc:
         raise CrfError(f"cannot read camera response {path}: {exc.strerror or exc}") from None
+    except UnicodeDecodeError:
+        raise CrfError(f"{path} is not a camera response (not text)") from None
     try:
         doc = yaml.safe_load(text)
     except yaml.YAMLError as exc:

@@ -20,7 +20,6 @@ import datetime as dt
 import json
 import logging
 import os
-import zipfile
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
@@ -38,7 +37,7 @@ from lightfast.daylight.patches import Patches, build_patches
 from lightfast.daylight.radiosity import PatchTransport, direct_irradiance, vertex_radiosity
 from lightfast.daylight.sun import Site
 from lightfast.errors import LightfastError
-from lightfast.io import atomic_directory, write_text_atomic
+from lightfast.io import atomic_directory, load_npz, read_json_mapping, write_text_atomic
 from lightfast.progress import track
 from lightfast.raycast import RayCaster
 
@@ -166,10 +165,7 @@ class LightingMap:
         meta_path = path / "metadata.json"
         if not meta_path.is_file():
             raise LightingMapError(f"no lighting map at {path} (missing metadata.json)")
-        try:
-            meta = json.loads(meta_path.read_text())
-        except (OSError, json.JSONDecodeError) as exc:
-            raise LightingMapError(f"{meta_path}: unreadable metadata ({exc})") from None
+        meta = read_json_mapping(meta_path, error=LightingMapError, what="the lighting map's metadata")
         if meta.get("format") != FORMAT_NAME:
             raise LightingMapError(f"{path} is not a lighting map (format {meta.get('format')!r})")
         if meta.get("version") != FORMAT_VERSION:
@@ -192,16 +188,13 @@ class LightingMap:
             # maps from before the normal merge grouped faces by normal bin alone
             config = config_from_mapping(LightingMapConfig, {"normal_merge_deg": 0.0, **meta["config"]})
             site = config_from_mapping(Site, meta["site"])
-            with np.load(path / "lighting_map.npz", allow_pickle=False) as npz:
-                a = {k: npz[k] for k in npz.files}
-        except (ConfigError, KeyError) as exc:
-            raise LightingMapError(f"{path}: bad metadata: {exc}") from None
-        except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
-            raise LightingMapError(f"{path}: lighting_map.npz is damaged or truncated ({exc})") from None
+        except (ConfigError, KeyError, TypeError) as exc:  # TypeError: a section of the wrong shape
+            raise LightingMapError(f"{path}: bad metadata: {exc!r}") from None
+        a = load_npz(path / "lighting_map.npz", error=LightingMapError, what="the lighting map's arrays")
         try:
             return cls._from_arrays(own_mesh, site, config, a, meta)
-        except (KeyError, ValueError, IndexError) as exc:
-            raise LightingMapError(f"{path}: inconsistent lighting map arrays ({exc})") from None
+        except (KeyError, ValueError, IndexError, TypeError) as exc:
+            raise LightingMapError(f"{path}: inconsistent lighting map arrays or metadata ({exc!r})") from None
 
     @classmethod
     def _from_arrays(cls, mesh: ReflectanceMesh, site: Site, config: LightingMapConfig, a: dict[str, np.ndarray],

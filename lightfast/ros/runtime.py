@@ -94,7 +94,7 @@ def _check_params_files(args: list[str]) -> None:
             data = yaml.safe_load(Path(path).read_text())
         except OSError as exc:
             raise ConfigError(f"cannot read the parameter file {path}: {exc.strerror or exc}") from None
-        except yaml.YAMLError as exc:
+        except (UnicodeDecodeError, yaml.YAMLError) as exc:
             raise ConfigError(f"the parameter file {path} is not valid YAML: {' '.join(str(exc).split())}") from None
         if not isinstance(data, dict):
             raise ConfigError(f"the parameter file {path} must map node names (or '/**') to 'ros__parameters'")

@@ -120,7 +120,7 @@ from lightfast.daylight.mesh import MeshError, ReflectanceMesh, load_ply, save_p
 from lightfast.daylight.sun import Site, sun_position
 from lightfast.errors import LightfastError
 from lightfast.geometry import inverse, make_transform, so3_exp
-from lightfast.io import atomic_directory, read_versioned_yaml, write_bytes_atomic, write_text_atomic
+from lightfast.io import atomic_directory, load_npz, read_versioned_yaml, write_bytes_atomic, write_text_atomic
 from lightfast.progress import track
 from lightfast.raycast import RayCaster
 from lightfast.sim.racr_platform import PlatformConfig, PlatformSimulator, VseConfig, VseStandIn
@@ -1877,12 +1877,12 @@ def load_reference(path: str | os.PathLike[str], *, scene: str | None = None) ->
                               what="a reference observation", version_key="format_version")
     if scene is not None and doc.get("scene") != scene:
         raise RacrSimError(f"{meta}: reference observation of scene {doc.get('scene')!r}, not {scene!r}")
+    z = load_npz(path / str(doc.get("points", "points.npz")), error=RacrSimError, what="the reference cloud")
     try:
-        with np.load(path / str(doc.get("points", "points.npz")), allow_pickle=False) as z:
-            pts = np.asarray(z["points_m"], np.float32)
-            inten = np.asarray(z["intensity"], np.float32)
-    except (OSError, KeyError, ValueError) as exc:
-        raise RacrSimError(f"{path}: cannot read the reference cloud: {exc}") from None
+        pts = np.asarray(z["points_m"], np.float32)
+        inten = np.asarray(z["intensity"], np.float32)
+    except (KeyError, ValueError, TypeError) as exc:
+        raise RacrSimError(f"{path}: cannot read the reference cloud: {exc!r}") from None
     if pts.ndim != 2 or pts.shape[1] != 3 or inten.shape != (len(pts),) or len(pts) != doc.get("num_points"):
         raise RacrSimError(f"{path}: reference cloud has shape {pts.shape} / intensity {inten.shape}, expected "
                            f"({doc.get('num_points')}, 3)")

@@ -42,7 +42,6 @@ import json
 import logging
 import math
 import os
-import zipfile
 from collections.abc import Mapping, Sequence
 from contextlib import ExitStack
 from dataclasses import dataclass, field
@@ -52,7 +51,7 @@ from typing import Any, Final
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from lightfast.io import atomic_directory, write_bytes_atomic, write_text_atomic
+from lightfast.io import atomic_directory, load_npz, read_json_mapping, write_bytes_atomic, write_text_atomic
 from lightfast.vtr.errors import VtrError, VtrInputError
 from lightfast.vtr.stereo import FEATURE_TYPES, StereoFeatures, check_stereo_pair
 
@@ -442,16 +441,6 @@ def _check_landmarks(lm: Landmarks, feature: str, dim: int, what: str, error: ty
 # Reading
 
 
-def _read_json(path: Path, what: str) -> dict[str, Any]:
-    try:
-        data = json.loads(path.read_text())
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise MapCorruptError(f"{what} {path} is unreadable: {exc}") from exc
-    if not isinstance(data, dict):
-        raise MapCorruptError(f"{what} {path} is not a JSON object")
-    return data
-
-
 def _get(d: Mapping[str, Any], key: str, kind: type | tuple[type, ...], what: str) -> Any:
     if key not in d:
         raise MapCorruptError(f"{what}: missing {key!r}")
@@ -501,11 +490,7 @@ def _load_keyframe(root: Path, entry: Mapping[str, Any], index: int, sources: tu
         raise MapCorruptError(f"{what}: cannot read {path}: {exc}") from exc
     if check_sha is not None and _sha256(data) != check_sha:
         raise MapCorruptError(f"{what}: {path} does not match its checksum (truncated or altered)")
-    try:
-        with np.load(io.BytesIO(data), allow_pickle=False) as z:
-            arrays = {k: z[k] for k in z.files}
-    except (OSError, ValueError, EOFError, zipfile.BadZipFile, KeyError) as exc:
-        raise MapCorruptError(f"{what}: {path} is not a readable npz file: {exc}") from exc
+    arrays = load_npz(path, error=MapCorruptError, what=what, data=data)
     try:
         file_index = int(arrays["index"])
         stamp_ns = int(arrays["stamp_ns"])
@@ -566,7 +551,7 @@ class MapStore:
         manifest_path = root / MANIFEST
         if not manifest_path.is_file():
             raise MapNotFoundError(f"no complete teach map at {root}: {MANIFEST} is missing (unfinished teach?)")
-        m = _read_json(manifest_path, "manifest")
+        m = read_json_mapping(manifest_path, error=MapCorruptError, what="manifest")
         sources, feature, dim, Pl, Pr, size = _check_header(m, manifest_path)
         what = str(manifest_path)
         entries = _get(m, "keyframes", list, what)
@@ -614,7 +599,7 @@ class MapStore:
         root = Path(partial)
         if not (root / STAGING).is_file():
             raise MapNotFoundError(f"{root} is not the staging directory of a teach ({STAGING} missing)")
-        h = _read_json(root / STAGING, "staging header")
+        h = read_json_mapping(root / STAGING, error=MapCorruptError, what="staging header")
         sources, feature, dim, Pl, Pr, size = _check_header(h, root / STAGING)
         keyframes, Ts = [], []
         while (root / _keyframe_file(len(keyframes))).is_file():

@@ -58,6 +58,20 @@ def test_damaged_maps_are_refused(tiny_lighting_map: Path, tmp_path: Path) -> No
         LightingMap.load(tiny_lighting_map, mesh=closed_box(n=3))
     with pytest.raises(LightingMapError, match="no lighting map"):
         LightingMap.load(tmp_path / "nothing")
+    # metadata of the wrong shape (each raised AttributeError / TypeError through the node before)
+    good = json.loads((tiny_lighting_map / "metadata.json").read_text())
+    for i, (bad, message) in enumerate([
+        ([1, 2], "must be a JSON object"),
+        ({**good, "config": [1, 2]}, "bad metadata"),
+        ({**good, "site": "Freiburg"}, "bad metadata"),
+        ({**good, "counts": {"patches": "many", "vertices": None}}, "inconsistent"),
+        ({**good, "counts": None}, "inconsistent"),
+        ('{"format": "lightfast-lighting-map", "vers', "unreadable"),
+    ]):
+        damaged = copy_map(tiny_lighting_map, tmp_path / f"meta{i}")
+        (damaged / "metadata.json").write_text(bad if isinstance(bad, str) else json.dumps(bad))
+        with pytest.raises(LightingMapError, match=message):
+            LightingMap.load(damaged)
     with pytest.raises(LightingMapError, match="exists"):
         LightingMap.load(tiny_lighting_map).save(tiny_lighting_map)
 

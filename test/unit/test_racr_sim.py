@@ -320,6 +320,15 @@ def test_reference_loader_refuses_bad_input(indoor, tmp_path: Path) -> None:
     (d2 / "points.npz").write_bytes(b"garbage")
     with pytest.raises(RacrSimError, match="reference cloud"):
         load_reference(d2)
+    d3 = write_reference(indoor.reference, tmp_path / "ref3")  # truncated: zipfile raised through racr_node
+    data = (d3 / "points.npz").read_bytes()
+    (d3 / "points.npz").write_bytes(data[: len(data) // 2])
+    with pytest.raises(RacrSimError, match="reference cloud is damaged or truncated"):
+        load_reference(d3)
+    d4 = write_reference(indoor.reference, tmp_path / "ref4")
+    (d4 / "reference.yaml").write_text("format: [unclosed\n")
+    with pytest.raises(RacrSimError, match="cannot read a reference observation"):
+        load_reference(d4)
 
 
 def test_generate_caches_and_rebuilds_half_written(tmp_path: Path) -> None:
