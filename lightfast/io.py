@@ -108,7 +108,8 @@ def load_npz(path: str | os.PathLike[str], *, error: type[Exception], what: str,
         with np.load(source, allow_pickle=False) as npz:
             return {k: npz[k] for k in npz.files}
     except NPZ_ERRORS as exc:
-        raise error(f"{path}: {what} is damaged or truncated, or not an npz file ({type(exc).__name__}: {exc})") from None
+        reason = f"{type(exc).__name__}: {exc}"
+        raise error(f"{path}: {what} is damaged or truncated, or not an npz file ({reason})") from None
 
 
 def read_json_mapping(path: str | os.PathLike[str], *, error: type[Exception], what: str) -> dict[str, Any]:
