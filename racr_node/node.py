@@ -69,6 +69,7 @@ from lightfast.geometry import matrix_to_quat, rotation_angle_deg
 from lightfast.racr.errors import RacrError
 from lightfast.racr.node_config import RacrNodeConfig
 from lightfast.racr.session import MotionCommand, RacrSession, SessionStatus
+from lightfast.ros.clock import on_time_jump_back
 from lightfast.ros.convert import (
     ConversionError,
     camera_from_camera_info,
@@ -79,7 +80,7 @@ from lightfast.ros.convert import (
 )
 from lightfast.ros.diagnostics import Level, ProblemLog, diagnostic_array, diagnostic_status, log_at
 from lightfast.ros.params import ConfigParameters
-from lightfast.ros.qos import LATCHED_QOS, OUTPUT_QOS
+from lightfast.ros.qos import LATCHED_QOS, OUTPUT_QOS, sensor_qos
 from lightfast.ros.racr_msgs import (
     keyframe_image_to_float,
     matrix_to_transform_stamped,
@@ -109,6 +110,8 @@ from lightfast.topics import (
 NODE_NAME = "racr_node"
 STAGE_NO_REFERENCE = "no_reference"
 #: Keyframe topics: every keyframe of an observation must fit into the queue.
+#: A clock step back larger than this restarts the relocalization (ROS time only goes back on sim time).
+TIME_JUMP_BACK_S = 1.0
 KEYFRAME_QOS = QoSProfile(depth=32, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
 #: Buffered VSE poses (by stamp) and keyframe halves (by stamp and frame) waiting for their clouds.
 MAX_POSES = 64
@@ -163,19 +166,40 @@ class RacrNode(Node):
         self.aligned_pub = self.create_publisher(PointCloud2, RACR_ALIGNED_CLOUD_TOPIC, OUTPUT_QOS)
         self.reference_pub = self.create_publisher(PointCloud2, RACR_REFERENCE_CLOUD_TOPIC, LATCHED_QOS)
         self.camera_pose_pub = self.create_publisher(PoseStamped, RACR_CAMERA_POSE_TOPIC, OUTPUT_QOS)
-        self.create_subscription(PointCloud2, VSE_POINTS_TOPIC, self._on_points, OUTPUT_QOS)
-        self.create_subscription(PoseStamped, VSE_POSE_TOPIC, self._on_vse_pose, OUTPUT_QOS)
+        sensor = sensor_qos(cfg)  # streams; keyframes and the platform's stop event stay reliable
+        self.create_subscription(PointCloud2, VSE_POINTS_TOPIC, self._on_points, sensor)
+        self.create_subscription(PoseStamped, VSE_POSE_TOPIC, self._on_vse_pose, sensor)
         self.create_subscription(Image, VSE_KEYFRAME_IMAGE_TOPIC, self._on_keyframe_image, KEYFRAME_QOS)
         self.create_subscription(TransformStamped, VSE_KEYFRAME_POSE_TOPIC, self._on_keyframe_pose, KEYFRAME_QOS)
-        self.create_subscription(CameraInfo, VSE_CAMERA_INFO_TOPIC, self._on_camera_info, OUTPUT_QOS)
-        self.create_subscription(PoseStamped, PLATFORM_POSE_TOPIC, self._on_platform_pose, OUTPUT_QOS)
+        self.create_subscription(CameraInfo, VSE_CAMERA_INFO_TOPIC, self._on_camera_info, sensor)
+        self.create_subscription(PoseStamped, PLATFORM_POSE_TOPIC, self._on_platform_pose, sensor)
         self.create_subscription(PoseStamped, PLATFORM_STOPPED_TOPIC, self._on_platform_stopped, OUTPUT_QOS)
+        self._jump_handle = on_time_jump_back(self, TIME_JUMP_BACK_S, self._on_clock_jump)
         self.create_timer(cfg.adjust_period_s, self._tick)
         self.create_timer(cfg.status_period_s, self._heartbeat)
         self._ready_pub = announce_ready(self)  # for `lightfast wait-ready` in launch-free scripts
         self._load_reference()
 
     # ---------------------------------------------------------------------------------------------- helpers
+    def _on_clock_jump(self, now_ns: int, jump_ns: int) -> None:
+        """ROS time went back (a restarted simulation, a bag played again): the session's motions and waits are
+        timed on the old time line, so the relocalization starts over with a new session (executor thread)."""
+        session, self.session = self.session, None
+        if session is not None:
+            try:
+                session.stop()
+            except RacrError as exc:
+                self.get_logger().error(f"rACR alignment thread: {exc}")
+        self._poses.clear()
+        self._kf_images.clear()
+        self._kf_poses.clear()
+        self._pending = None
+        self._last_cloud_stamp = self._last_estimate_stamp = self._last_state = self._last_command = None
+        self._reference_attempt = None
+        self._dead = False
+        self.get_logger().warning(f"ROS time jumped back {-jump_ns * 1e-9:.3f} s (a restarted simulation, or a bag "
+                                  "played again?): the relocalization starts over")
+
     def _now_s(self) -> float:
         return self.get_clock().now().nanoseconds * 1e-9
 

@@ -15,6 +15,11 @@
 #   PREROLL          seconds the clock runs before the first frame, for the first sun update (default 30)
 #   MODE             tracker mode: proposed | refl-f2m | depth-only | no-color-f2m (default proposed)
 #   RATE             playback rate (default 1 = real time)
+#   PLAYS            how many times the recording is played, one `lightfast bag play` after the other (default 1;
+#                    each play after the first sends time back: the nodes start over, the scores are per play)
+#   PLAY_ARGS        extra `lightfast bag play` options, e.g. "--loops 2" or "--reliability best_effort"
+#   SENSOR_RELIABILITY  the nodes' sensor_reliability (default reliable: a replay loses nothing; a live camera
+#                    driver is best_effort, the nodes' default)
 #   TRACKER_PARAMS   extra rgbd_tracker_node parameters, e.g. "finest_point_step:=2 f2m_iterations:=[4,3,2]"
 #   RECORD_TOPICS    topics to record (default: what the scoring reads, /tracker/pose, both status topics, the sun
 #                    chunks and direction; "all": also the coarse pose, odometry and the brightness scales)
@@ -35,6 +40,9 @@ sun_period=${SUN_UPDATE_PERIOD:-60.0}
 [[ $sun_period == *.* ]] || sun_period="$sun_period.0"  # a double parameter
 mode=${MODE:-proposed}
 rate=${RATE:-1}
+plays=${PLAYS:-1}
+sensor=${SENSOR_RELIABILITY:-reliable}
+read -r -a play_args <<<"${PLAY_ARGS:-}"
 export ROS_DOMAIN_ID=${ROS_DOMAIN_ID:-$(( (RANDOM % 200) + 20 ))}
 # one BLAS/OpenMP thread per process: five processes share 2 cores, and idle BLAS workers spin on them
 export OPENBLAS_NUM_THREADS=${OPENBLAS_NUM_THREADS:-1} OMP_NUM_THREADS=${OMP_NUM_THREADS:-1}
@@ -66,13 +74,14 @@ echo "== starting the nodes (domain $ROS_DOMAIN_ID, logs in $logs)"
 nice -n 19 "$bin/sun_update_node" --ros-args -p use_sim_time:=true -p lighting_map:="$map" -p update_period_s:="$sun_period" \
   -p patches_per_step:=2000 >"$logs/sun_update_node.log" 2>&1 &
 pids+=($!)
-"$bin/daylight_relight_node" --ros-args -p use_sim_time:=true -p lighting_map:="$map" \
+"$bin/daylight_relight_node" --ros-args -p use_sim_time:=true -p sensor_reliability:="$sensor" -p lighting_map:="$map" \
   -p crf_file:="$seq_dir/camera.yaml" -p reference:="$([ "$mode" = refl-f2m ] && echo reflectance || echo relit)" \
   >"$logs/daylight_relight_node.log" 2>&1 &
 pids+=($!)
 tracker_params=()
 for kv in ${TRACKER_PARAMS:-}; do tracker_params+=(-p "$kv"); done
-"$bin/rgbd_tracker_node" --ros-args -p use_sim_time:=true -p mode:="$mode" -p initial_pose:="$initial_pose" \
+"$bin/rgbd_tracker_node" --ros-args -p use_sim_time:=true -p sensor_reliability:="$sensor" -p mode:="$mode" \
+  -p initial_pose:="$initial_pose" \
   "${tracker_params[@]}" \
   >"$logs/rgbd_tracker_node.log" 2>&1 &
 pids+=($!)
@@ -96,28 +105,33 @@ pids+=($recorder)
 "$lf" wait-ready sun_update_node daylight_relight_node rgbd_tracker_node --timeout 300 \
   --pid "${pids[0]}" --pid "${pids[1]}" --pid "${pids[2]}" || { echo "the nodes did not start: see $logs" >&2; exit 1; }
 # the clock runs $preroll s before the first frame: time for the first sun update epoch to stream in
-echo "== playing $seq_dir/bag at rate $rate with /clock ($preroll s preroll)"
-# /clock at 20 Hz between frames (and before each frame): every node on sim time takes each clock message
-"$lf" -v bag play "$seq_dir/bag" --rate "$rate" --clock 20 --preroll "$preroll" --wait-for-subscribers 120 \
-  --topics /camera/color/image_raw /camera/color/camera_info /camera/depth/image_raw >"$logs/player.log" 2>&1 &
-player=$!
-pids+=($player)
-# each process's CPU time from the first frame on (the player waits for its subscribers, then runs the preroll; it
-# reports its own CPU time from the first frame on)
 names=(sun_update_node daylight_relight_node rgbd_tracker_node recorder)
 cpu_before=()
-for _ in $(seq 3000); do
-  grep -q "playing from bag time" "$logs/player.log" 2>/dev/null || ! kill -0 "$player" 2>/dev/null && break
-  sleep 0.05
+for play in $(seq "$plays"); do
+  echo "== playing $seq_dir/bag at rate $rate with /clock ($preroll s preroll)${play_args[*]:+ ${play_args[*]}} (play $play of $plays)"
+  # /clock at 20 Hz between frames (and before each frame): every node on sim time takes each clock message
+  "$lf" -v bag play "$seq_dir/bag" --rate "$rate" --clock 20 --preroll "$preroll" --wait-for-subscribers 120 \
+    --topics /camera/color/image_raw /camera/color/camera_info /camera/depth/image_raw "${play_args[@]}" \
+    >"$logs/player-$play.log" 2>&1 &
+  player=$!
+  pids+=($player)
+  if [ "$play" = 1 ]; then
+    # each process's CPU time from the first frame on (the player waits for its subscribers, then runs the preroll;
+    # it reports its own CPU time from the first frame on)
+    for _ in $(seq 3000); do
+      grep -q "playing from bag time" "$logs/player-1.log" 2>/dev/null || ! kill -0 "$player" 2>/dev/null && break
+      sleep 0.05
+    done
+    for pid in "${pids[@]:0:4}"; do cpu_before+=("$(cpu_seconds "$pid")"); done
+  fi
+  wait "$player" || { echo "bag play failed: see $logs/player-$play.log" >&2; exit 1; }
 done
-for pid in "${pids[@]:0:4}"; do cpu_before+=("$(cpu_seconds "$pid")"); done
-wait "$player"
 sleep 2  # the last frames' poses
 cpu_line="CPU seconds from the first frame on:"
 for i in "${!names[@]}"; do
   cpu_line+=" ${names[$i]} $(awk -v a="${cpu_before[$i]}" -v b="$(cpu_seconds "${pids[$i]}")" 'BEGIN {printf "%.1f", b - a}'),"
 done
-cpu_line+=" player $(sed -n 's/.*, \([0-9.]*\) s CPU$/\1/p' "$logs/player.log" | tail -1)"
+cpu_line+=" player $(sed -n 's/.*, \([0-9.]*\) s CPU.*/\1/p' "$logs/player-1.log" | tail -1)"
 
 kill -INT "$recorder"
 wait "$recorder" || true

@@ -15,8 +15,9 @@ stop() {  # stop PID: SIGINT, then wait up to 20 s, then SIGKILL
   kill -INT "$pid" 2>/dev/null || return 0
   timeout 20 tail --pid="$pid" -f /dev/null 2>/dev/null || kill -KILL "$pid" 2>/dev/null || true
 }
-cleanup() {
+cleanup() {  # SIGINT, SIGTERM after 10 s, SIGKILL 10 s later; returns only once every process is gone
   local sig left
+  trap '' INT TERM  # a second Ctrl-C must not cut the cleanup short and leave processes behind
   for sig in INT TERM KILL; do
     left=$(running "${pids[@]}")
     [[ -z $left ]] && return 0
@@ -24,6 +25,7 @@ cleanup() {
     kill "-$sig" $left 2>/dev/null || true
     for _ in $(seq 100); do [[ -z $(running "${pids[@]}") ]] && return 0; sleep 0.1; done
   done
+  while [[ -n $(running "${pids[@]}") ]]; do sleep 0.1; done  # SIGKILL cannot be refused: they go
 }
 trap cleanup EXIT
 trap 'echo "interrupted"; exit 130' INT TERM

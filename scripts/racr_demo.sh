@@ -21,6 +21,7 @@
 #                  estimate resolves at small image sizes, so the run would never stop)
 #   SEED           seed of the platform's mechanical error; the VSE stand-in uses SEED + 1 (default 0)
 #   TIMEOUT        give up after this many seconds (default 300)
+#   SENSOR_RELIABILITY  racr_node's sensor_reliability (default reliable: lossless; racr_node's own default is best_effort)
 #   ROS_DOMAIN_ID  DDS domain (default: a random id)
 set -euo pipefail
 root=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
@@ -39,6 +40,7 @@ time_scale=$(decimal "${TIME_SCALE:-10}")
 eta=$(decimal "${ETA:-1e-3}")
 timeout_s=${TIMEOUT:-300}
 seed=${SEED:-0}
+sensor=${SENSOR_RELIABILITY:-reliable}  # lossless; best_effort is the default of racr_node for live VSEs
 export ROS_DOMAIN_ID=${ROS_DOMAIN_ID:-$(( (RANDOM % 200) + 20 ))}
 mkdir -p "$out"
 out=$(cd "$out" && pwd)
@@ -71,7 +73,7 @@ pids+=("$!")
   >"$logs/vse.log" 2>&1 &
 pids+=("$!")
 "$bin/racr_node" --ros-args -p reference_path:="$scene/reference" -p reference_scene:="$scene_name" \
-  -p mode:="$mode" -p eta:="$eta" >"$logs/racr.log" 2>&1 &
+  -p mode:="$mode" -p eta:="$eta" -p sensor_reliability:="$sensor" >"$logs/racr.log" 2>&1 &
 pids+=("$!")
 
 rc=0

@@ -16,6 +16,7 @@
 #   RATE             playback rate (default 1 = real time; the node drops pairs it cannot keep up with in the repeat)
 #   LENGTH, SIZE     simulated route length in metres and image size WxH (default 40 and 320x240)
 #   REPEAT_RUN       simulated repeat to use (default repeat07: shadows opposite to the map's)
+#   SENSOR_RELIABILITY  the node's sensor_reliability (default reliable: a replay loses nothing)
 #   ROS_DOMAIN_ID    DDS domain (default: a random id)
 set -euo pipefail
 root=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
@@ -26,6 +27,7 @@ tools=("$bin/python" -m vtr_localizer_node.tools)
 out=${LIGHTFAST_OUT:-$root/out}
 mode=${MODE:-fused}
 rate=${RATE:-1}
+sensor=${SENSOR_RELIABILITY:-reliable}  # a replay loses nothing; a live camera driver is best_effort
 export ROS_DOMAIN_ID=${ROS_DOMAIN_ID:-$(( (RANDOM % 200) + 20 ))}
 mkdir -p "$out"
 out=$(cd "$out" && pwd)
@@ -66,7 +68,7 @@ node_failed() {  # the node's log tells why
 echo "== teach: vtr_localizer_node on $teach_bag -> $map (domain $ROS_DOMAIN_ID, logs in $logs)"
 # a teach should lose no pair: a long queue
 "$bin/vtr_localizer_node" --ros-args -p mode:=teach -p map_path:="$map" -p overwrite_map:=true \
-  -p max_queued_frames:=10000 >"$logs/teach.log" 2>&1 &
+  -p max_queued_frames:=10000 -p sensor_reliability:="$sensor" >"$logs/teach.log" 2>&1 &
 teach_pid=$!
 pids+=("$teach_pid")
 "${tools[@]}" wait-idle --pid "$teach_pid" --settle 0 --timeout 120 >/dev/null || node_failed teach
@@ -76,6 +78,7 @@ stop "$teach_pid"
 
 echo "== repeat ($mode): vtr_localizer_node on $repeat_bag against $map, output recorded to $recorded"
 "$bin/vtr_localizer_node" --ros-args -p mode:=repeat -p map_path:="$map" -p repeat_mode:="$mode" \
+  -p sensor_reliability:="$sensor" \
   >"$logs/repeat.log" 2>&1 &
 repeat_pid=$!
 pids+=("$repeat_pid")

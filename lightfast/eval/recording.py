@@ -11,6 +11,9 @@ recorded during ``lightfast bag play``, and the ground truth from the played bag
   /clock, which runs with wall time at rate 1), median and 95th percentile;
 * per-stage timings like paper Table II: f2f and f2m from the tracker's status, rendering and estimation from the
   relight node's status (median and mean, ms).
+
+A recording of the bag played several times (played again, or ``--loop``) is scored per play: a play starts where
+the stamps of the recorded poses go back by more than :data:`PLAY_RESTART_S` (:func:`play_windows`).
 """
 from __future__ import annotations
 
@@ -34,8 +37,10 @@ from lightfast.topics import (
     TRACKER_STATUS_TOPIC,
 )
 
-__all__ = ["RecordingScore", "score_recording"]
+__all__ = ["PLAY_RESTART_S", "RecordingScore", "play_windows", "score_recording"]
 
+#: Pose stamps going back by more than this start a new play of the bag, s.
+PLAY_RESTART_S = 1.0
 STAGES = {"f2f": ("tracker", "f2f_ms"), "rendering": ("relight", "render_ms"),
           "estimation": ("relight", "estimate_ms"), "f2m": ("tracker", "f2m_ms")}
 
@@ -88,9 +93,32 @@ def _values(msg: object) -> dict[str, str]:
     return diagnostic_values(status[0]) if status else {}
 
 
-def score_recording(recorded: Path, truth: Path) -> RecordingScore:
-    """Score the pipeline outputs in ``recorded`` against the ground truth poses in ``truth`` (see module doc)."""
+def play_windows(recorded: Path) -> list[tuple[int, int]]:
+    """The log-time windows ``[start_ns, end_ns)`` of each play of the bag in ``recorded``: a new play starts at
+    the first pose whose stamp is more than :data:`PLAY_RESTART_S` before the previous pose's."""
+    from lightfast.ros.convert import stamp_to_ns
+
+    starts: list[int] = []
+    previous: int | None = None
+    with open_bag(recorded) as bag:
+        if TRACKER_POSE_TOPIC not in set(bag.select_topics(None)):
+            raise RecordingError(f"{recorded}: no {TRACKER_POSE_TOPIC} recorded")
+        for m in bag.messages(topics=[TRACKER_POSE_TOPIC]):
+            stamp = stamp_to_ns(bag.deserialize(m).header.stamp)
+            if previous is None or previous - stamp > PLAY_RESTART_S * 1e9:
+                starts.append(m.log_time_ns if previous is not None else 0)
+            previous = stamp
+    if not starts:
+        raise RecordingError(f"{recorded}: no {TRACKER_POSE_TOPIC} message")
+    return list(zip(starts, [*starts[1:], 2**63 - 1], strict=True))
+
+
+def score_recording(recorded: Path, truth: Path, window: tuple[int, int] | None = None) -> RecordingScore:
+    """Score the pipeline outputs in ``recorded`` against the ground truth poses in ``truth`` (see module doc);
+    ``window`` (from :func:`play_windows`) scores only the messages recorded in that log-time window."""
     from lightfast.ros.convert import pose_stamped_to_matrix
+
+    lo, hi = window if window is not None else (0, 2**63 - 1)
 
     gt: dict[int, NDArray[np.float64]] = {}
     frames = 0
@@ -117,6 +145,8 @@ def score_recording(recorded: Path, truth: Path) -> RecordingScore:
                   if t in topics]
         chunk_times: list[tuple[float, int]] = []
         for m in bag.messages(topics=wanted):
+            if not lo <= m.log_time_ns < hi:
+                continue
             if m.topic == SUN_CHUNK_TOPIC:  # only the arrival time and epoch (header stamp) are needed
                 header = bag.deserialize(m).header
                 chunk_times.append((m.log_time_ns * 1e-9, header.stamp.sec * 1_000_000_000 + header.stamp.nanosec))
@@ -163,5 +193,11 @@ def main_eval_recording(argv: list[str] | None = None) -> int:
     p.add_argument("recorded", type=Path, help="bag recorded from the running nodes")
     p.add_argument("--truth", type=Path, required=True, help="the bag that was played (with ground truth poses)")
     args = p.parse_args(argv)
-    print(score_recording(args.recorded, args.truth).summary(), end="")
+    windows = play_windows(args.recorded)
+    if len(windows) == 1:
+        print(score_recording(args.recorded, args.truth).summary(), end="")
+        return 0
+    for i, window in enumerate(windows, 1):  # the bag was played several times: each play on its own
+        print(f"== play {i} of {len(windows)}")
+        print(score_recording(args.recorded, args.truth, window).summary(), end="")
     return 0

@@ -14,7 +14,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from lightfast.config import Config, ConfigError, param
+from lightfast.config import ConfigError, param
+from lightfast.node_options import SensorInputOptions
 from lightfast.racr.adjustment import AdjustmentConfig
 from lightfast.racr.fast_alignment import FastAlignmentConfig
 from lightfast.racr.fine_alignment import FineAlignmentConfig
@@ -34,7 +35,7 @@ _FINE = FineAlignmentConfig()
 
 
 @dataclass(frozen=True)
-class RacrNodeConfig(Config):
+class RacrNodeConfig(SensorInputOptions):
     """Parameters of ``racr_node`` (module docstring)."""
 
     # reference observation ------------------------------------------------------------------------------------

@@ -41,7 +41,8 @@ class PlayOptions(Config):
 
     rate: float = param(1.0, description="Playback speed relative to the recording; 0 plays as fast as possible.",
                         min=0.0)
-    loop: bool = param(False, description="Start over when the bag ends (until interrupted).")
+    loop: bool = param(False, description="Start over when the bag ends (until interrupted, or max_loops).")
+    max_loops: int = param(0, description="With loop: stop after this many plays of the bag; 0 = no limit.", min=0)
     clock_hz: float = param(0.0, description="Publish /clock (bag time) at this rate and before every message, for "
                             "nodes with use_sim_time; 0 disables /clock.", min=0.0)
     topics: tuple[str, ...] = param((), description="Topics to play; empty plays every topic.")
@@ -55,6 +56,9 @@ class PlayOptions(Config):
                                  "acknowledge every message.", min=0.0)
     qos_depth: int = param(0, description="Publisher history depth; 0 keeps all (a reliable subscriber loses "
                            "nothing), N keeps the last N.", min=0)
+    reliability: str = param("", description="Publish with this reliability instead of what the recorded "
+                             "publishers offered (best_effort: like a camera driver with sensor-data QoS).",
+                             choices=("", "reliable", "best_effort"))
 
 
 @dataclass(frozen=True)
@@ -170,7 +174,8 @@ def _play(reader: BagReader, node: Node, options: PlayOptions, stop: threading.E
         if topic.serialization_format != "cdr":
             raise BagError(f"{name}: cannot play serialization format {topic.serialization_format!r} (only cdr)")
         publishers[name] = node.create_publisher(
-            message_class(topic.msgtype), name, playback_qos(topic.offered_qos, depth=options.qos_depth)
+            message_class(topic.msgtype), name,
+            playback_qos(topic.offered_qos, depth=options.qos_depth, reliability=options.reliability or None)
         )
     clock = _ClockPublisher(node, options.clock_hz)
     if options.wait_for_subscribers_s > 0:
@@ -214,7 +219,7 @@ def _play(reader: BagReader, node: Node, options: PlayOptions, stop: threading.E
             last_ns = msg.log_time_ns
         if first_ns is not None:
             bag_time_played_ns += last_ns - first_ns
-        if not options.loop or first_ns is None:
+        if not options.loop or first_ns is None or 0 < options.max_loops <= loops:
             break
     wall_s = time.monotonic() - wall_start if wall_start is not None else 0.0
     cpu_s = time.process_time() - cpu_start if wall_start is not None else 0.0

@@ -44,14 +44,19 @@ def sensor_qos(options: SensorInputOptions) -> QoSProfile:
                       durability=DurabilityPolicy.VOLATILE)
 
 
-def playback_qos(offered: Sequence[Qos], *, depth: int = 0) -> QoSProfile:
+def playback_qos(offered: Sequence[Qos], *, depth: int = 0, reliability: str | None = None) -> QoSProfile:
     """The QoS a player should publish a bag topic with, given what its publishers offered when recorded.
 
-    Reliable unless some recorded publisher was best-effort; transient-local only if every one was; history
-    KEEP_ALL by default (a reliable subscriber then loses nothing however fast the bag plays) or KEEP_LAST
-    ``depth`` if ``depth > 0``.
+    Reliable unless some recorded publisher was best-effort (or as ``reliability``, ``reliable`` or
+    ``best_effort``, says); transient-local only if every one was; history KEEP_ALL by default (a reliable
+    subscriber then loses nothing however fast the bag plays) or KEEP_LAST ``depth`` if ``depth > 0``.
     """
-    best_effort = any(q.reliability == QosReliability.BEST_EFFORT for q in offered)
+    if reliability is None:
+        best_effort = any(q.reliability == QosReliability.BEST_EFFORT for q in offered)
+    elif reliability in SENSOR_RELIABILITIES:
+        best_effort = reliability == "best_effort"
+    else:
+        raise ValueError(f"reliability must be one of {SENSOR_RELIABILITIES}, got {reliability!r}")
     latched = bool(offered) and all(q.durability == QosDurability.TRANSIENT_LOCAL for q in offered)
     history = dict(history=HistoryPolicy.KEEP_LAST, depth=depth) if depth > 0 else dict(history=HistoryPolicy.KEEP_ALL)
     return QoSProfile(

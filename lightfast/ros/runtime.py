@@ -27,6 +27,10 @@ from lightfast.errors import LightfastError
 from lightfast.ros.transport import use_local_transport
 
 
+#: Longest teardown of a node or session (destroying a node has been seen to hang); then the process exits.
+SHUTDOWN_GRACE_S = 5.0
+
+
 @contextmanager
 def ros_session(
     node_name: str,
@@ -35,7 +39,7 @@ def ros_session(
     install_signal_handlers: bool = True,
     args: list[str] | None = None,
     use_sim_time: bool = False,
-    shutdown_grace_s: float = 5.0,
+    shutdown_grace_s: float = SHUTDOWN_GRACE_S,
 ) -> Iterator[tuple[Node, SingleThreadedExecutor]]:
     """A node on its own context and executor, with lightfast's local DDS transport.
 
@@ -166,9 +170,14 @@ def run_node(make_node: Callable[[], Node], name: str, args: list[str] | None = 
         if rclpy.ok():  # a real error; after a signal the wait set may fail on the shut-down context instead
             raise
     finally:
+        # the node's work is over: a teardown that hangs (seen in destroy_node) must not keep the process alive
+        watchdog = threading.Timer(SHUTDOWN_GRACE_S, os._exit, args=(3,))
+        watchdog.daemon = True
+        watchdog.start()
         if executor is not None:
             executor.shutdown(timeout_sec=1.0)
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
+        watchdog.cancel()
     return 0

@@ -117,7 +117,8 @@ def test_sigint_during_a_teach_leaves_the_previous_map(tmp_path: Path, domain_id
     probe.create_subscription(DiagnosticArray, VTR_STATUS_TOPIC,
                               lambda msg: status.update(diagnostic_values(msg.status[0])), OUTPUT_QOS)
     cmd = [sys.executable, "-m", "vtr_localizer_node.node", "--ros-args", "-p", "mode:=teach", "-p",
-           f"map_path:={map_path}", "-p", "overwrite_map:=true", "-p", "max_queued_frames:=100"]
+           f"map_path:={map_path}", "-p", "overwrite_map:=true", "-p", "max_queued_frames:=100",
+           "-p", "sensor_reliability:=reliable"]
     with bounded_process(cmd, timeout_s=240, env=child_env(domain_id)) as proc:
         assert spin_until(executor, lambda: all(p.get_subscription_count() == 1 for p in pubs.values()), 120)
         left_info, right_info = stereo_camera_infos()
