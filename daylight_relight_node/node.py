@@ -294,8 +294,8 @@ class DaylightRelightNode(Node):
         self._worker.wake()
 
     def _time_jumped(self, why: str) -> None:
-        """(Worker, under the input lock.) Time went back: the scale average restarts and the next complete sun epoch is taken whatever its time
-        (the B̂_sun in use stays until then)."""
+        """(Worker, under the input lock.) Time went back: the scale average restarts and the next complete sun
+        epoch is taken whatever its time (the B̂_sun in use stays until then)."""
         self.stats["time_jumps"] += 1
         self._guard.reset()
         self.relighter.restart_average()

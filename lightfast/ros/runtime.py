@@ -26,7 +26,6 @@ from lightfast.config import ConfigError
 from lightfast.errors import LightfastError
 from lightfast.ros.transport import use_local_transport
 
-
 #: Longest teardown of a node or session (destroying a node has been seen to hang); then the process exits.
 SHUTDOWN_GRACE_S = 5.0
 
