@@ -27,10 +27,11 @@ Outputs, per processed stereo pair and stamped with it:
 * ``/vtr/localization`` (``geometry_msgs/PoseWithCovarianceStamped``, repeat only, from the first localization on):
   the pose of the left camera relative to the taught path, i.e. in the frame of the nearest keyframe along the
   path, ``frame_id = vtr_keyframe_<index>`` (``keyframe_frame_prefix``; that keyframe's left optical frame). On a
-  localized pair the covariance is the localization's (nominal 1 px noise), turned from the camera-frame perturbation of the core
-  (ξ = (ρ, φ) in ``T·exp(ξ)``) into position and rotation perturbations in the keyframe frame (J = diag(R, R)); on
-  a pair carried by VO alone (the paper: "the VO estimate is used as the final pose estimate if localization
-  fails") it is diagonal, growing with the distance on VO (``vo_drift_m_per_m``, ``vo_drift_deg_per_m``).
+  localized pair the covariance is the localization's (nominal 1 px noise), turned from the camera-frame
+  perturbation of the core (ξ = (ρ, φ) in ``T·exp(ξ)``) into position and rotation perturbations in the keyframe
+  frame (J = diag(R, R)); on a pair carried by VO alone (the paper: "the VO estimate is used as the final pose
+  estimate if localization fails") it is diagonal, growing with the distance on VO (``vo_drift_m_per_m``,
+  ``vo_drift_deg_per_m``).
 * ``/vtr/odometry`` (``nav_msgs/Odometry``, teach and repeat): the greyscale VO chained from the first pair
   processed, ``frame_id = vtr_odom`` (``odom_frame``) → ``child_frame_id`` = the left image's frame; twist from
   the last VO step (child frame); covariances zero (unknown).
