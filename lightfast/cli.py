@@ -1,7 +1,9 @@
 """``lightfast``: the command line. Each subcommand is a thin wrapper over a library function.
 
 Exit codes: 0 success; 1 a lightfast error (one line on stderr, no traceback; ``LIGHTFAST_DEBUG=1`` shows it);
-2 bad usage; 3 an unexpected internal error; 4 ``bag compare`` found differences; 130 interrupted.
+2 bad usage; 3 an unexpected internal error; 4 ``bag compare`` found differences; 5 ``bag play`` skipped corrupt
+chunks of the bag (one warning line; ``--skip-corrupt`` accepts that and exits 0) or ``bag info --check`` found
+some; 130 interrupted.
 """
 from __future__ import annotations
 
@@ -20,6 +22,7 @@ from pathlib import Path
 from lightfast.errors import LightfastError
 
 EXIT_ERROR, EXIT_USAGE, EXIT_INTERNAL, EXIT_DIFFERENT, EXIT_INTERRUPTED = 1, 2, 3, 4, 130
+EXIT_CORRUPT = 5  # bag play skipped corrupt chunks (without --skip-corrupt), bag info --check found some
 log = logging.getLogger("lightfast")
 
 
@@ -46,10 +49,19 @@ def _stop_on_signals() -> Iterator[threading.Event]:
 # --- bag ------------------------------------------------------------------------------------------------------
 
 def _cmd_bag_info(args: argparse.Namespace) -> int:
-    from lightfast.bag import open_bag
+    from lightfast.bag import SkippedChunks, open_bag
 
     with open_bag(args.bag) as bag:
-        print(bag.info.format())
+        print(bag.info.format(), flush=True)
+        if not args.check:
+            return 0
+        skipped = SkippedChunks()
+        count = sum(1 for _ in bag.messages(skipped=skipped))
+    print(f"Check:             {count} messages read" + (f", {skipped.summary()}" if skipped else ", no corrupt chunk"))
+    if skipped:
+        _warn_corrupt(args.bag, skipped.summary(), [c.describe() for c in skipped.chunks.values()],
+                      "the bag is damaged")
+        return EXIT_CORRUPT
     return 0
 
 
@@ -59,7 +71,8 @@ def _cmd_bag_play(args: argparse.Namespace) -> int:
 
     options = PlayOptions(
         rate=args.rate,
-        loop=args.loop,
+        loop=args.loop or args.loops > 0,
+        max_loops=args.loops,
         clock_hz=args.clock or 0.0,
         topics=tuple(args.topics or ()),
         start_offset_s=args.start_offset,
@@ -67,14 +80,27 @@ def _cmd_bag_play(args: argparse.Namespace) -> int:
         wait_for_subscribers_s=args.wait_for_subscribers or 0.0,
         ack_timeout_s=args.ack_timeout,
         qos_depth=args.qos_depth,
+        reliability=args.reliability,
     )
     from lightfast.bag import open_bag
 
     with open_bag(args.bag) as bag, _stop_on_signals() as stop:
         with ros_session("lightfast_bag_play", domain_id=args.domain_id, install_signal_handlers=False) as (node, _):
             report = play_bag(bag, node, options, stop=stop)
-    print(report.summary())
-    return EXIT_INTERRUPTED if report.interrupted else 0
+    print(report.summary(), flush=True)
+    if report.interrupted:
+        return EXIT_INTERRUPTED
+    if report.corrupt_chunks:
+        verdict = "accepted (--skip-corrupt)" if args.skip_corrupt else "the replay is incomplete"
+        _warn_corrupt(args.bag, report.skipped_summary(), [c.describe() for c in report.corrupt_chunks], verdict)
+        return 0 if args.skip_corrupt else EXIT_CORRUPT
+    return 0
+
+
+def _warn_corrupt(bag: str, summary: str, chunks: Sequence[str], verdict: str) -> None:
+    """One warning line on stderr: what was skipped, the first corrupt chunk (descriptions), the verdict."""
+    more = f" (and {len(chunks) - 1} more)" if len(chunks) > 1 else ""
+    print(f"lightfast: warning: {bag}: {summary}; first: {chunks[0]}{more}; {verdict}", file=sys.stderr)
 
 
 def _cmd_bag_record(args: argparse.Namespace) -> int:
@@ -87,7 +113,7 @@ def _cmd_bag_record(args: argparse.Namespace) -> int:
         "lightfast_bag_record", domain_id=args.domain_id, install_signal_handlers=False,
         use_sim_time=args.use_sim_time,
     ) as (node, executor):
-        writer = BagWriter(args.output, storage=args.storage, overwrite=args.overwrite)
+        writer = BagWriter(args.output, storage=args.storage, overwrite=args.overwrite, compression=args.compression)
         recorder = BagRecorder(node, writer, topics=topics)
         try:
             print(f"recording {'all topics' if topics is None else ' '.join(topics)} to {args.output} "
@@ -215,11 +241,26 @@ def _cmd_wait_ready(args: argparse.Namespace) -> int:
     return 0
 
 
-def _cmd_dds_env(_args: argparse.Namespace) -> int:
-    from lightfast.ros.transport import local_transport_env
+def _cmd_dds_env(args: argparse.Namespace) -> int:
+    from lightfast.ros import transport
 
-    for key, value in local_transport_env().items():
-        print(f"export {key}={value}")
+    if not args.network:
+        given = [flag for flag, value in (("--hosts", args.hosts), ("--interface", args.interface),
+                                          ("--udp-only", args.udp_only)) if value]
+        if given:
+            raise LightfastError(f"{' and '.join(given)} only go with --network")
+        print("\n".join(transport.shell_lines(transport.local_transport_env(), transport.LOCAL_UNSET)))
+        return 0
+    env = transport.network_transport_env(args.hosts or (), args.interface or (), udp_only=args.udp_only)
+    if missing := transport.unresolved_hosts(args.hosts or ()):
+        raise LightfastError(f"cannot resolve {', '.join(missing)} to an IPv4 address (the nodes would not start: "
+                             "rmw_fastrtps resolves ROS_STATIC_PEERS when it creates a node)")
+    for name in transport.unknown_interfaces(args.interface or ()):
+        print(f"lightfast: warning: {name} is no interface or IPv4 address of this machine; Fast DDS uses only "
+              "the whitelisted ones that exist (loopback if none)", file=sys.stderr)
+    unset = transport.NETWORK_UNSET if args.hosts else (*transport.NETWORK_UNSET, transport.PEERS_ENV)
+    print(f"# {transport.describe_transport(transport.apply_env(os.environ, env, unset))}")
+    print("\n".join(transport.shell_lines(env, unset)))
     return 0
 
 
@@ -241,12 +282,16 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = bag_sub.add_parser("info", help="print a bag's topics, types, counts, rates and QoS")
     p.add_argument("bag", help="bag directory, or its .mcap/.db3 file")
+    p.add_argument("--check", action="store_true",
+                   help="also read every message and check every MCAP chunk (exit 5 if some are corrupt)")
     p.set_defaults(func=_cmd_bag_info)
 
     p = bag_sub.add_parser("play", help="publish a bag's messages on live topics")
     p.add_argument("bag", help="bag directory, or its .mcap/.db3 file")
     p.add_argument("-r", "--rate", type=float, default=1.0, help="speed factor; 0 = as fast as possible (default 1)")
     p.add_argument("-l", "--loop", action="store_true", help="play again from the start when the bag ends")
+    p.add_argument("--loops", type=int, default=0, metavar="N",
+                   help="with --loop, stop after N plays of the bag (default: until interrupted)")
     p.add_argument("--clock", **_optional_float(40.0),
                    help="publish /clock for use_sim_time, at VALUE Hz (default 40) and before every message")
     p.add_argument("--topics", nargs="+", metavar="TOPIC", help="play only these topics")
@@ -258,6 +303,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--ack-timeout", type=float, default=30.0, metavar="SECONDS",
                    help="at the end wait this long for reliable subscribers to acknowledge (default 30)")
     p.add_argument("--qos-depth", type=int, default=0, metavar="N", help="KEEP_LAST N instead of KEEP_ALL")
+    p.add_argument("--reliability", choices=("reliable", "best_effort"), default="",
+                   help="publish with this QoS reliability instead of the recorded publishers' (best_effort: as a "
+                   "camera driver with sensor-data QoS does)")
+    p.add_argument("--skip-corrupt", action="store_true",
+                   help="exit 0 even if corrupt chunks of the bag were skipped (they are skipped and reported "
+                   "either way; without this option the exit code is 5)")
     p.add_argument("--domain-id", type=int, default=None, help="ROS domain id (default: ROS_DOMAIN_ID or 0)")
     p.set_defaults(func=_cmd_bag_play)
 
@@ -266,6 +317,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-a", "--all", action="store_true", help="record every topic (except /rosout, /parameter_events)")
     p.add_argument("-o", "--output", required=True, help="bag directory to create")
     p.add_argument("-s", "--storage", choices=("mcap", "sqlite3"), default="mcap", help="storage (default mcap)")
+    p.add_argument("--compression", choices=("none", "zstd", "lz4"), default="none",
+                   help="MCAP chunk compression (default none); the file stays readable by any MCAP reader")
     p.add_argument("--overwrite", action="store_true", help="replace an existing bag at --output")
     p.add_argument("--max-duration", type=float, default=0.0, metavar="SECONDS", help="stop after SECONDS")
     p.add_argument("--max-messages", type=int, default=0, metavar="N", help="stop after N messages")
@@ -359,7 +412,20 @@ def build_parser() -> argparse.ArgumentParser:
 
     dds = sub.add_parser("dds", help="DDS transport settings")
     dds_sub = dds.add_subparsers(dest="dds_command", required=True, metavar="DDS_COMMAND")
-    p = dds_sub.add_parser("env", help="print the export lines that run nodes by hand with lightfast's profile")
+    p = dds_sub.add_parser(
+        "env", help="print the export lines that run nodes by hand with lightfast's profile",
+        description="Print shell lines for `eval \"$(lightfast dds env ...)\"`. Default: the local profile (shared "
+        "memory + UDP on loopback, discovery LOCALHOST: this machine only). --network: the network profile "
+        "(shared memory within a machine, UDP between machines, discovery SUBNET).")
+    p.add_argument("--network", action="store_true",
+                   help="run across machines: lightfast/ros/fastdds_network.xml, ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET")
+    p.add_argument("--hosts", nargs="+", metavar="HOST",
+                   help="with --network: also discover these machines by unicast (ROS_STATIC_PEERS; IPv4 or name)")
+    p.add_argument("--interface", nargs="+", metavar="ADDR",
+                   help="with --network: UDP only on these interfaces (IPv4 address or name; loopback is added); "
+                   "writes a generated profile to ~/.cache/lightfast/dds/")
+    p.add_argument("--udp-only", action="store_true",
+                   help="with --network: no shared memory (containers that do not share /dev/shm); generated profile")
     p.set_defaults(func=_cmd_dds_env)
     return parser
 

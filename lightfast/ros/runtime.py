@@ -24,7 +24,7 @@ from rclpy.signals import SignalHandlerOptions
 from lightfast.bag.errors import UnknownMessageTypeError
 from lightfast.config import ConfigError
 from lightfast.errors import LightfastError
-from lightfast.ros.transport import use_local_transport
+from lightfast.ros.transport import describe_transport, use_local_transport
 
 #: Longest teardown of a node or session (destroying a node has been seen to hang); then the process exits.
 SHUTDOWN_GRACE_S = 5.0
@@ -157,6 +157,7 @@ def run_node(make_node: Callable[[], Node], name: str, args: list[str] | None = 
     executor: Executor | None = None
     try:
         node = make_node()
+        node.get_logger().info(describe_transport())  # which DDS profile and discovery range: this host only?
         executor = MultiThreadedExecutor(num_threads=num_threads) if num_threads > 1 else SingleThreadedExecutor()
         executor.add_node(node)
         spin(executor, node)

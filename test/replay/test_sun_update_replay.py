@@ -86,3 +86,5 @@ def test_a_negative_clock_does_not_end_the_node(tiny_lighting_map: Path, domain_
     assert alive, err
     assert chunks and all(c >= START_NS for c in chunks)
     assert "a callback failed, carrying on" in err and "Traceback" not in err
+    # at start-up the node said which DDS profile and discovery range it uses (this host only, here)
+    assert "DDS: profile local (lightfast/ros/fastdds_local.xml" in err and "discovery LOCALHOST" in err

@@ -6,7 +6,7 @@ inside functions too, relative ones skipped) and every interface type string suc
 ``"builtin_interfaces/msg/Time"`` (message classes that ``importlib`` loads by name). Each third-party top-level
 module goes through :data:`MODULE_DEPS` to its dependency: a ROS package name or rosdep key, which package.xml must
 declare as ``exec_depend``/``depend``, or ``pip:<distribution>`` for a library with no usable rosdep key, which must
-be in package.xml's pip-only comment and in the pip command of docs_snippets/real_jazzy_install.md, pinned as in
+be in package.xml's pip-only comment and in the pip command of docs/install.md, pinned as in
 requirements.lock. Declared entries that nothing imports fail too (test and buildtool entries aside, and
 :data:`ALLOWED_UNUSED`).
 """
@@ -24,7 +24,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[2]
 PACKAGE_XML = ROOT / "package.xml"
 SETUP_PY = ROOT / "setup.py"
-SNIPPET = ROOT / "docs_snippets" / "real_jazzy_install.md"
+SNIPPET = ROOT / "docs" / "install.md"
 LOCK = ROOT / "requirements.lock"
 
 #: Top-level module -> what provides it: a ROS package name, a rosdep key (rosdistro rosdep/python.yaml or
