@@ -42,6 +42,7 @@ from lightfast.ros.diagnostics import Level, diagnostic_level, diagnostic_values
 from lightfast.ros.msgtypes import RCLPY, MessageTypes
 from lightfast.ros.qos import OUTPUT_QOS
 from lightfast.ros.spin import spin_until
+from lightfast.ros.tf import TF_QOS, TF_TOPIC
 from lightfast.topics import (
     STEREO_LEFT_FRAME,
     STEREO_LEFT_IMAGE_TOPIC,
@@ -251,6 +252,7 @@ def partial_dirs(map_path: Path) -> list[Path]:
 
 
 def test_teach_finish_then_repeat_localizes_near_the_truth(vtr, tmp_path: Path) -> None:
+    """Teach, finish, repeat; the bag played again restarts the repeat; the poses on /tf."""
     r = route()
     map_path = tmp_path / "route_map"
     node, probe = vtr(mode="teach", map_path=str(map_path))
@@ -317,6 +319,28 @@ def test_teach_finish_then_repeat_localizes_near_the_truth(vtr, tmp_path: Path) 
     assert probe.spin_until(lambda: fog_stamp in probe.got["localization"])
     cov = np.asarray(probe.got["localization"][fog_stamp].pose.covariance).reshape(6, 6)
     np.testing.assert_allclose(np.diag(cov)[:3], (0.05 * d) ** 2 + 1e-6, rtol=1e-4)  # vo_drift_m_per_m (d: 6 digits)
+
+    # the bag played again: the stamps go back, the repeat starts over (VO at its origin, a whole-map search); on /tf
+    # the left camera hangs off vtr_odom and the localized keyframe off the camera (the camera keeps one parent)
+    tf2_msgs = pytest.importorskip("tf2_msgs.msg", reason="tf2_msgs is built by scripts/setup.sh")
+    transforms: list = []
+    probe.node.create_subscription(tf2_msgs.TFMessage, TF_TOPIC, lambda m: transforms.extend(m.transforms), TF_QOS)
+    probe.reset()
+    stamp0 = r.repeat_stamps[0]
+    probe.send_pair(stamp0, *r.repeat[0])
+    level, message, values = probe.frame_status(stamp0)
+    assert values["localized"] == "true" and values["searched_map"] == "true", message
+    assert node.stats["time_jumps"] == 1
+    assert probe.spin_until(lambda: stamp0 in probe.got["localization"] and stamp0 in probe.got["odom"]
+                            and len([t for t in transforms if stamp_to_ns(t.header.stamp) == stamp0]) == 2)
+    tf = {(t.header.frame_id, t.child_frame_id): t.transform for t in transforms
+          if stamp_to_ns(t.header.stamp) == stamp0}
+    keyframe = probe.got["localization"][stamp0].header.frame_id
+    assert set(tf) == {(VTR_ODOM_FRAME, STEREO_LEFT_FRAME), (STEREO_LEFT_FRAME, keyframe)}
+    np.testing.assert_allclose(pose_to_matrix(probe.got["odom"][stamp0].pose.pose), np.eye(4), atol=1e-9)  # origin
+    t = tf[(STEREO_LEFT_FRAME, keyframe)].translation
+    T_kf_cam = pose_to_matrix(probe.got["localization"][stamp0].pose.pose)
+    np.testing.assert_allclose([t.x, t.y, t.z], np.linalg.inv(T_kf_cam)[:3, 3], atol=1e-9)
 
     # legacy greyscale cannot match the changed illuminant: it never localizes near the truth. (Its whole-map search
     # may accept a wrong consensus of a few inliers in this repetitive corridor: 9 of 96 matches, 2.7 m off, found
