@@ -23,6 +23,7 @@ from geometry_msgs.msg import PoseStamped, TransformStamped
 from rclpy.executors import Executor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rosgraph_msgs.msg import Clock
 from scipy.spatial import cKDTree
 from sensor_msgs.msg import Image, PointCloud2
 
@@ -31,6 +32,7 @@ from lightfast.geometry import inverse, make_transform, rotation_angle_deg, so3_
 from lightfast.racr.session import initialization_motions
 from lightfast.ros.convert import (
     matrix_to_pose_stamped,
+    ns_to_stamp,
     numpy_to_image,
     numpy_to_pointcloud2,
     pointcloud2_to_numpy,
@@ -357,6 +359,25 @@ def test_missing_reference_is_reported_and_retried(scene_dir: Path, tmp_path: Pa
     assert probe.spin_until(lambda: probe.last[2].get("stage") not in (None, "no_reference"))
     rig.publish_state()
     assert probe.spin_until(lambda: len(probe.motions) >= 1)
+
+
+def test_sim_time_jumping_back_starts_the_relocalization_over(scene_dir: Path, start, make_node, executor) -> None:
+    """On use_sim_time, /clock going back (a restarted simulation): the session timed on the old clock is dropped
+    (stopped) and a new one starts from the reference."""
+    racr = start(RacrNode, reference_path=str(scene_dir / "reference"), use_sim_time=True, status_period_s=0.2)
+    player = make_node("sim_clock")
+    clock = player.create_publisher(Clock, "/clock", 10)
+    sim = {"t": 1_700_000_000 * 10**9}
+
+    def tick() -> None:  # sim time at wall speed: the node's timers run on it
+        sim["t"] += 10_000_000
+        clock.publish(Clock(clock=ns_to_stamp(sim["t"])))
+
+    player.create_timer(0.01, tick)
+    assert spin_until(executor, lambda: racr.session is not None and racr.get_clock().now().nanoseconds > 0, 30.0)
+    first = racr.session
+    sim["t"] -= 100 * 10**9
+    assert spin_until(executor, lambda: racr.session is not None and racr.session is not first, 30.0)
 
 
 def test_reference_of_another_scene_is_refused(scene_dir: Path, tmp_path: Path, start, make_node,
