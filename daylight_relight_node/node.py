@@ -1,14 +1,18 @@
 """``daylight_relight_node``: the relit reference colour + depth of each live frame at its coarse pose (paper §III-C,
 §III-D), for the frame-to-model step of ``rgbd_tracker_node``.
 
-Subscribes the live colour image ``/camera/color/image_raw`` (rgb8) with ``/camera/color/camera_info``, the
+Subscribes the live colour image ``/camera/color/image_raw`` (rgb8, bgr8, rgba8 or bgra8) with
+``/camera/color/camera_info`` (best effort unless ``sensor_reliability`` says otherwise), the
 tracker's coarse pose ``/tracker/coarse_pose`` (PoseStamped in ``map``, stamped with the image it belongs to) and
 the B̂_sun chunks ``/radiosity/sun_chunk`` of ``sun_update_node``. Image and coarse pose are paired by exact stamp
 (either may come first). A new B̂_sun is swapped in only when every vertex of its epoch has arrived; until the first
 complete epoch no reference is published. For each pair it publishes, with the image's stamp and frame:
 ``/relight/reference/color`` (rgb8), ``/relight/reference/depth`` (32FC1 metres, 0 = no geometry), the averaged
 brightness scales ``/relight/scale/{sun,sky,ground}`` (Vector3Stamped, x=r, y=g, z=b) and ``/relight/status``
-(DiagnosticArray: sun epoch, chunk progress, pixels used, stage timings).
+(DiagnosticArray: sun epoch, chunk progress, pixels used, stage timings). Sun epochs stamped more than
+``max_sun_epoch_ahead_s`` ahead of the node's clock, or older than the one in use, are dropped with a log line; time
+going back (``time_jump_back_s``) restarts the brightness average and lets the next complete epoch in, whatever
+its time.
 
 Threading: the executor's callbacks only convert and buffer, then wake a worker thread that relights the queued
 frames one at a time and also applies a completed B̂_sun and parameter changes, so nothing mutates the relighter

@@ -1,16 +1,20 @@
 """``rgbd_tracker_node``: two-step direct RGB-D tracking (paper §III-D, Eq. 7) — frame-to-frame against the previous
 frame, then frame-to-model against the relit reference of ``daylight_relight_node``.
 
-Subscribes ``/camera/color/image_raw`` (rgb8), ``/camera/depth/image_raw`` (32FC1 metres or 16UC1 millimetres,
-registered to the colour camera) and ``/camera/color/camera_info``; colour and depth are paired by exact stamp. Per
+Subscribes ``/camera/color/image_raw`` (rgb8, bgr8, rgba8, bgra8 or mono8), ``/camera/depth/image_raw`` (32FC1
+metres or 16UC1 millimetres, registered to the colour camera) and ``/camera/color/camera_info``, best effort unless
+``sensor_reliability`` says otherwise; colour and depth are paired by exact stamp. Per
 frame the f2f step gives T≈, published as ``/tracker/coarse_pose`` (PoseStamped in ``map``, the image's stamp).
 The reference colour + depth rendered there (``/relight/reference/color`` rgb8, ``/relight/reference/depth``
 32FC1, paired by stamp) refine it (f2m). A frame whose reference has not come within ``reference_timeout_s`` (wall
 time), or that falls out of the ``max_pending`` window, or whose successor's reference comes first, is finished
 with its f2f pose. Each finished frame is published on ``/tracker/pose`` (PoseStamped, ``map``),
 ``/tracker/odometry`` (nav_msgs/Odometry, child frame = the image's optical frame) and ``/tracker/status``
-(DiagnosticArray: source f2m/f2f, reason, mode, f2f/f2m ms, inlier ratios, latency). Tracking starts at the
-``initial_pose`` parameter; a PoseStamped on ``/tracker/reset`` restarts it at that pose.
+(DiagnosticArray: source f2m/f2f, reason, mode, f2f/f2m ms, inlier ratios, latency), and on ``/tf`` as
+``map_frame`` → ``camera_frame`` (``publish_tf``). Tracking starts at the ``initial_pose`` parameter (logged at the
+first frame); RViz's ``/initialpose`` (PoseWithCovarianceStamped) or a PoseStamped on ``/tracker/reset`` restarts it
+at that pose. Time going back (``time_jump_back_s``: /clock, or the frames' stamps; a bag played again) restarts
+tracking at ``initial_pose``; a frame stamped more than ``max_stamp_ahead_s`` ahead of the node's clock is refused.
 
 Threading: the executor's callbacks only convert and buffer, then wake one of two worker threads. The f2f worker
 tracks the queued frames one at a time, applies parameter changes, resets and camera changes, and finishes frames

@@ -5,7 +5,8 @@ Publishes ``/sun/direction`` (geometry_msgs/Vector3Stamped, unit vector towards 
 b`` float32: B̂_sun of a contiguous vertex range; ``header.stamp`` is the sun time of the update — its epoch; the
 chunks of an epoch cover every vertex of the lighting map exactly once, so a subscriber holding the same map knows
 an epoch is complete when it has all vertices). Time is the node clock: with ``use_sim_time`` it follows /clock,
-e.g. from ``lightfast bag play --clock``.
+e.g. from ``lightfast bag play --clock``; when it jumps back (a bag played again) the running update is dropped and
+one for the new time starts.
 """
 from __future__ import annotations
 
