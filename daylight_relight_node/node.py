@@ -47,7 +47,6 @@ from lightfast.errors import LightfastError
 from lightfast.ros.clock import on_time_jump_back
 from lightfast.ros.convert import (
     CameraInfoReader,
-    ConversionError,
     image_to_rgb,
     make_header,
     numpy_to_image,
@@ -56,6 +55,7 @@ from lightfast.ros.convert import (
     stamp_to_ns,
 )
 from lightfast.ros.diagnostics import Level, ProblemLog, diagnostic_array, diagnostic_status, log_at
+from lightfast.ros.errors import ConversionError
 from lightfast.ros.params import ConfigParameters
 from lightfast.ros.qos import OUTPUT_QOS, sensor_qos
 from lightfast.ros.ready import announce_ready

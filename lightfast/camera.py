@@ -11,11 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from lightfast.errors import LightfastError
-
-
-class CameraModelError(LightfastError, ValueError):
-    """An invalid or unsupported camera model (bad intrinsics, non-zero distortion we cannot model)."""
+from lightfast.errors import CameraModelError
 
 
 @dataclass(frozen=True)

@@ -6,7 +6,10 @@ A component declares its options with :func:`param` (default, description, bound
 (:func:`load_config_yaml`, ``yaml.safe_load`` only).
 
 Supported field types: ``bool``, ``int``, ``float``, ``str`` and tuples of one of them (``tuple[float, ...]``),
-the types a ROS parameter can hold.
+the types a ROS parameter can hold; and another :class:`Config` (a *section*): a node's configuration composes the
+configurations of the core components it runs instead of copying their fields. A section's fields become dotted
+ROS parameters (``stereo.max_features``) and a nested mapping in YAML; its default is the instance given to
+:func:`param` (which may differ from the section class's own defaults).
 
 Example::
 
@@ -27,14 +30,10 @@ from typing import Any, TypeVar
 
 import yaml
 
-from lightfast.errors import LightfastError
+from lightfast.errors import ConfigError
 
 C = TypeVar("C", bound="Config")
 SCALAR_TYPES = (bool, int, float, str)
-
-
-class ConfigError(LightfastError, ValueError):
-    """A configuration value is missing, of the wrong type, out of range, or unknown."""
 
 
 def param(
@@ -71,6 +70,11 @@ class FieldSpec:
     choices: tuple[Any, ...] | None
     read_only: bool
 
+    @property
+    def is_section(self) -> bool:
+        """The field holds another configuration (a section of dotted parameters)."""
+        return isinstance(self.scalar_type, type) and issubclass(self.scalar_type, Config)
+
     def describe(self) -> str:
         """The description with the valid values appended, e.g. ``"Chunk size. [1, 100000]"``."""
         text = self.description
@@ -84,7 +88,7 @@ class FieldSpec:
 
 
 def _resolve(annotation: Any, owner: type, name: str) -> tuple[type, bool]:
-    if annotation in SCALAR_TYPES:
+    if annotation in SCALAR_TYPES or (isinstance(annotation, type) and issubclass(annotation, Config)):
         return annotation, False
     origin, args = typing.get_origin(annotation), typing.get_args(annotation)
     if origin is tuple and len(args) == 2 and args[1] is Ellipsis and args[0] in SCALAR_TYPES:
@@ -150,8 +154,15 @@ def _check_value(spec: FieldSpec, value: Any, where: str) -> Any:
 
 
 def coerce_field(spec: FieldSpec, value: Any, *, owner: str = "") -> Any:
-    """Check and convert one value for ``spec`` (ints become floats for float fields, lists become tuples)."""
+    """Check and convert one value for ``spec`` (ints become floats for float fields, lists become tuples, a
+    mapping becomes a section laid over the field's default)."""
     where = f"{owner}.{spec.name}" if owner else spec.name
+    if spec.is_section:
+        if isinstance(value, spec.scalar_type):
+            return value
+        if isinstance(value, Mapping):
+            return replace_config(spec.default, value)
+        raise ConfigError(f"{where} must be a {spec.scalar_type.__name__} or a mapping of its fields, got {value!r}")
     if spec.is_tuple:
         if isinstance(value, (str, bytes)) or not isinstance(value, (list, tuple)):
             raise ConfigError(f"{where} must be a list of {spec.scalar_type.__name__}, got {value!r}")
@@ -176,19 +187,99 @@ class Config:
         """Cross-field validation hook."""
 
     def to_dict(self) -> dict[str, Any]:
-        """Plain values (tuples as lists), ready for YAML or ROS parameters."""
-        return {s.name: list(v) if s.is_tuple else v for s in field_specs(self) for v in [getattr(self, s.name)]}
+        """Plain values (tuples as lists, sections as nested dicts), ready for YAML or ROS parameters."""
+        def plain(spec: FieldSpec, v: Any) -> Any:
+            return v.to_dict() if spec.is_section else list(v) if spec.is_tuple else v
+        return {s.name: plain(s, getattr(self, s.name)) for s in field_specs(self)}
+
+
+def leaf_specs(cls: type[Config], prefix: str = "") -> list[tuple[str, FieldSpec]]:
+    """Every non-section field, sections flattened, as ``(dotted name, spec)`` in declaration order."""
+    out: list[tuple[str, FieldSpec]] = []
+    for spec in field_specs(cls):
+        if spec.is_section:
+            out += leaf_specs(spec.scalar_type, f"{prefix}{spec.name}.")
+        else:
+            out.append((prefix + spec.name, spec))
+    return out
+
+
+def leaf_values(config: Config, prefix: str = "") -> dict[str, Any]:
+    """``{dotted name: value}`` of every non-section field of ``config``."""
+    out: dict[str, Any] = {}
+    for spec in field_specs(config):
+        value = getattr(config, spec.name)
+        if spec.is_section:
+            out.update(leaf_values(value, f"{prefix}{spec.name}."))
+        else:
+            out[prefix + spec.name] = value
+    return out
+
+
+def _split(cls: type[Config], values: Mapping[str, Any]) -> tuple[dict[str, Any], dict[str, dict[str, Any]],
+                                                                 list[str]]:
+    """``values`` (plain keys, dotted keys ``section.field`` or nested mappings) as the values of ``cls``'s own
+    fields, the mappings per section, and the keys ``cls`` does not know."""
+    if not isinstance(values, Mapping):
+        raise ConfigError(f"{cls.__name__} needs a mapping of its fields, got {type(values).__name__} {values!r}")
+    specs = {s.name: s for s in field_specs(cls)}
+    own: dict[str, Any] = {}
+    sections: dict[str, dict[str, Any]] = {}
+    unknown: list[str] = []
+    for key, value in values.items():
+        head, dot, rest = str(key).partition(".")
+        spec = specs.get(head)
+        if spec is None or (dot and not spec.is_section):
+            unknown.append(str(key))
+        elif dot:
+            sections.setdefault(head, {})[rest] = value
+        elif spec.is_section and isinstance(value, Mapping):
+            sections.setdefault(head, {}).update(value)
+        else:
+            own[head] = value
+    return own, sections, unknown
+
+
+def _check_known(cls: type[Config], values: Mapping[str, Any]) -> None:
+    """Raise naming every key of ``values`` (dotted, at any depth) that ``cls`` does not have."""
+    def unknown_keys(config_cls: type[Config], mapping: Mapping[str, Any], prefix: str) -> list[str]:
+        _, sections, unknown = _split(config_cls, mapping)
+        specs = {s.name: s for s in field_specs(config_cls)}
+        out = [prefix + key for key in unknown]
+        for head, sub in sections.items():
+            out += unknown_keys(specs[head].scalar_type, sub, f"{prefix}{head}.")
+        return out
+
+    unknown = unknown_keys(cls, values, "")
+    if unknown:
+        known = ", ".join(name for name, _ in leaf_specs(cls))
+        raise ConfigError(f"unknown {cls.__name__} parameter(s): {', '.join(sorted(unknown))} (known: {known})")
+
+
+def replace_config(config: C, values: Mapping[str, Any], *, allow_unknown: bool = False) -> C:
+    """``config`` with the fields in ``values`` changed (plain, dotted or nested keys; a section's fields are laid
+    over its current value); validated like a new instance."""
+    if not allow_unknown:
+        _check_known(type(config), values)
+    own, sections, _ = _split(type(config), values)
+    for head, mapping in sections.items():
+        own[head] = replace_config(own.get(head, getattr(config, head)), mapping, allow_unknown=True)
+    return dataclasses.replace(config, **own) if own else config
 
 
 def config_from_mapping(cls: type[C], values: Mapping[str, Any], *, allow_unknown: bool = False) -> C:
-    """Build ``cls`` from a mapping; unknown keys are an error unless ``allow_unknown``."""
-    known = {s.name for s in field_specs(cls)}
-    unknown = sorted(set(values) - known)
-    if unknown and not allow_unknown:
-        raise ConfigError(
-            f"unknown {cls.__name__} parameter(s): {', '.join(unknown)} (known: {', '.join(sorted(known))})"
-        )
-    return cls(**{k: v for k, v in values.items() if k in known})
+    """Build ``cls`` from a mapping (plain, dotted or nested keys; a section's fields are laid over the section's
+    default); unknown keys are an error unless ``allow_unknown``."""
+    if not allow_unknown:
+        _check_known(cls, values)
+    own, sections, _ = _split(cls, values)
+    defaults = {s.name: s.default for s in field_specs(cls)}
+    for head, mapping in sections.items():
+        start = own.get(head, defaults[head])
+        if not isinstance(start, Config):
+            raise ConfigError(f"{cls.__name__}.{head} must be a mapping of its fields, got {start!r}")
+        own[head] = replace_config(start, mapping, allow_unknown=True)
+    return cls(**own)
 
 
 def _yaml_scalar(value: Any) -> str:
@@ -214,11 +305,21 @@ def config_yaml(cls_or_instance: type[Config] | Config, *, node_name: str) -> st
         "/**:",
         "  ros__parameters:",
     ]
-    for spec in field_specs(cls):
-        lines.append(f"    # {spec.describe()}" + (" (read-only at run time)" if spec.read_only else ""))
-        value = getattr(instance, spec.name)
-        lines.append(f"    {spec.name}: {_yaml_scalar(list(value) if spec.is_tuple else value)}")
+    lines += _yaml_fields(instance, indent="    ")
     return "\n".join(lines) + "\n"
+
+
+def _yaml_fields(config: Config, *, indent: str) -> list[str]:
+    lines = []
+    for spec in field_specs(config):
+        lines.append(f"{indent}# {spec.describe()}" + (" (read-only at run time)" if spec.read_only else ""))
+        value = getattr(config, spec.name)
+        if spec.is_section:
+            lines.append(f"{indent}{spec.name}:")
+            lines += _yaml_fields(value, indent=indent + "  ")
+        else:
+            lines.append(f"{indent}{spec.name}: {_yaml_scalar(list(value) if spec.is_tuple else value)}")
+    return lines
 
 
 def load_config_yaml(cls: type[C], path: str | os.PathLike[str], *, node_name: str | None = None) -> C:

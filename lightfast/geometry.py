@@ -30,10 +30,9 @@ import math
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from lightfast.errors import LightfastError
+from lightfast.errors import GeometryError
 
 __all__ = [
-    "GeometryError",
     "compose",
     "hat",
     "inverse",
@@ -66,10 +65,6 @@ QUAT_NORM_TOL = 1e-3
 # just above it, the K^2 coefficients of the closed forms lose ~eps/t^2 to cancellation, ~eps absolute in the matrices.
 _SMALL_ANGLE = 1e-2
 _SMALL_LOG_SCALE = 2.0  # |lambda| below this: moments of exp(lambda tau) by power series, above by recursion
-
-
-class GeometryError(LightfastError, ValueError):
-    """An invalid geometric input: wrong shape, non-finite values, not a rotation or transform, bad quaternion."""
 
 
 # ----------------------------------------------------------------------------------------------------------------

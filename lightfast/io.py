@@ -91,7 +91,7 @@ def read_versioned_yaml(path: str | os.PathLike[str], *, format_name: str, versi
     try:
         doc = yaml.safe_load(path.read_text())
     except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
-        raise error(f"{path}: {what} is unreadable ({exc})") from None
+        raise error(f"{path}: cannot read {what} ({exc})") from None
     if not isinstance(doc, dict) or doc.get("format") != format_name:
         raise error(f"{path} is not {what} (expected format: {format_name})")
     if doc.get(version_key) != version:

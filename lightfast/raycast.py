@@ -40,9 +40,9 @@ from embreex import rtcore_scene as rtcs
 from embreex.mesh_construction import TriangleMesh
 from numpy.typing import ArrayLike, NDArray
 
-from lightfast.errors import LightfastError
+from lightfast.errors import RaycastError
 
-__all__ = ["RayCaster", "RayHits", "RaycastError"]
+__all__ = ["RayCaster", "RayHits"]
 
 #: Default maximum number of rays handed to Embree at once (bounds the temporaries to ~100 MB per thread).
 DEFAULT_CHUNK_RAYS = 1 << 20
@@ -56,10 +56,6 @@ _Rays = tuple[tuple[int, ...], _F64, _F64, _F64, _F64]
 #: (2 threads): 19 200 rays (a 160×120 reference) took the same wall time split or not and 10 % more CPU split;
 #: 384 000 rays took 87 instead of 143 ms wall split.
 _MIN_PARALLEL_CHUNK = 1 << 15
-
-
-class RaycastError(LightfastError, ValueError):
-    """Invalid input to the ray caster: a bad mesh or bad rays (shape, non-finite values, zero directions)."""
 
 
 class _Mesh:

@@ -71,7 +71,6 @@ from lightfast.racr.node_config import RacrNodeConfig
 from lightfast.racr.session import MotionCommand, RacrSession, SessionStatus
 from lightfast.ros.clock import on_time_jump_back
 from lightfast.ros.convert import (
-    ConversionError,
     camera_from_camera_info,
     matrix_to_pose_stamped,
     pose_stamped_to_matrix,
@@ -79,6 +78,7 @@ from lightfast.ros.convert import (
     xyz_to_pointcloud2,
 )
 from lightfast.ros.diagnostics import Level, ProblemLog, diagnostic_array, diagnostic_status, log_at
+from lightfast.ros.errors import ConversionError
 from lightfast.ros.params import ConfigParameters
 from lightfast.ros.qos import LATCHED_QOS, OUTPUT_QOS, sensor_qos
 from lightfast.ros.racr_msgs import (

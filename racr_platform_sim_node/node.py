@@ -37,8 +37,9 @@ from geometry_msgs.msg import PoseStamped, TransformStamped
 from rclpy.node import Node
 
 from lightfast.config import ConfigError
-from lightfast.ros.convert import ConversionError, matrix_to_pose_stamped
+from lightfast.ros.convert import matrix_to_pose_stamped
 from lightfast.ros.diagnostics import Level, ProblemLog, diagnostic_array, diagnostic_status, log_at
+from lightfast.ros.errors import ConversionError
 from lightfast.ros.params import ConfigParameters
 from lightfast.ros.qos import OUTPUT_QOS
 from lightfast.ros.racr_msgs import transform_stamped_to_matrix

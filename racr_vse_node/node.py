@@ -36,7 +36,6 @@ from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 from lightfast.config import ConfigError
 from lightfast.errors import LightfastError
 from lightfast.ros.convert import (
-    ConversionError,
     camera_info_from_camera,
     matrix_to_pose_stamped,
     numpy_to_image,
@@ -44,6 +43,7 @@ from lightfast.ros.convert import (
     xyz_to_pointcloud2,
 )
 from lightfast.ros.diagnostics import Level, ProblemLog, diagnostic_array, diagnostic_status, log_at
+from lightfast.ros.errors import ConversionError
 from lightfast.ros.params import ConfigParameters
 from lightfast.ros.qos import OUTPUT_QOS
 from lightfast.ros.racr_msgs import matrix_to_transform_stamped

@@ -46,7 +46,6 @@ from lightfast.camera import PinholeCamera
 from lightfast.ros.clock import on_time_jump_back
 from lightfast.ros.convert import (
     CameraInfoReader,
-    ConversionError,
     image_to_numpy,
     image_to_rgb,
     matrix_to_odometry,
@@ -56,6 +55,7 @@ from lightfast.ros.convert import (
     stamp_to_ns,
 )
 from lightfast.ros.diagnostics import Level, ProblemLog, diagnostic_array, diagnostic_status, log_at
+from lightfast.ros.errors import ConversionError
 from lightfast.ros.params import ConfigParameters
 from lightfast.ros.qos import OUTPUT_QOS, sensor_qos
 from lightfast.ros.ready import announce_ready
@@ -78,8 +78,9 @@ from lightfast.topics import (
     TRACKER_RESET_TOPIC,
     TRACKER_STATUS_TOPIC,
 )
+from lightfast.tracking.errors import TrackingError
 from lightfast.tracking.pipeline import F2FJob, RGBDTracker, TrackerConfig, TrackResult
-from lightfast.tracking.rgbd_odometry import TrackingError, warm_up
+from lightfast.tracking.rgbd_odometry import warm_up
 
 NODE_NAME = "rgbd_tracker_node"
 #: Unpaired colour / depth images (and reference colour / depth) kept per side.

@@ -77,7 +77,7 @@ pids+=("$!")
 pids+=("$!")
 
 rc=0
-"$bin/python" -m racr_node.tools wait --scene "$scene" --timeout "$timeout_s" --pid "${pids[@]}" || rc=$?
+"$bin/lightfast" racr wait --scene "$scene" --timeout "$timeout_s" --pid "${pids[@]}" || rc=$?
 if [ "$rc" -eq 130 ]; then
   echo "interrupted"
   exit 130

@@ -23,7 +23,6 @@ root=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 bash "$root/scripts/setup.sh"
 bin="$root/.venv/bin"
 lf="$bin/lightfast"
-tools=("$bin/python" -m vtr_localizer_node.tools)
 out=${LIGHTFAST_OUT:-$root/out}
 mode=${MODE:-fused}
 rate=${RATE:-1}
@@ -71,9 +70,9 @@ echo "== teach: vtr_localizer_node on $teach_bag -> $map (domain $ROS_DOMAIN_ID,
   -p max_queued_frames:=10000 -p sensor_reliability:="$sensor" >"$logs/teach.log" 2>&1 &
 teach_pid=$!
 pids+=("$teach_pid")
-"${tools[@]}" wait-idle --pid "$teach_pid" --settle 0 --timeout 120 >/dev/null || node_failed teach
+"$lf" vtr wait-idle --pid "$teach_pid" --settle 0 --timeout 120 >/dev/null || node_failed teach
 "$lf" bag play "$teach_bag" --rate "$rate" --wait-for-subscribers 120 --topics "${stereo[@]}"
-"${tools[@]}" finish-teach --pid "$teach_pid" --settle 2 --timeout 600 || node_failed teach
+"$lf" vtr finish-teach --pid "$teach_pid" --settle 2 --timeout 600 || node_failed teach
 stop "$teach_pid"
 
 echo "== repeat ($mode): vtr_localizer_node on $repeat_bag against $map, output recorded to $recorded"
@@ -85,16 +84,16 @@ pids+=("$repeat_pid")
 "$lf" bag record --overwrite -o "$recorded" /vtr/localization /vtr/odometry /vtr/status >"$logs/record.log" 2>&1 &
 recorder=$!
 pids+=("$recorder")
-"${tools[@]}" wait-idle --pid "$repeat_pid" --settle 0 --timeout 120 --subscribers /vtr/localization /vtr/odometry \
+"$lf" vtr wait-idle --pid "$repeat_pid" --settle 0 --timeout 120 --subscribers /vtr/localization /vtr/odometry \
   >/dev/null || node_failed repeat
 "$lf" bag play "$repeat_bag" --rate "$rate" --wait-for-subscribers 120 --topics "${stereo[@]}"
-"${tools[@]}" wait-idle --pid "$repeat_pid" --settle 2 --timeout 600 || node_failed repeat
+"$lf" vtr wait-idle --pid "$repeat_pid" --settle 2 --timeout 600 || node_failed repeat
 stop "$recorder"
 stop "$repeat_pid"
 
 echo "== result ($mode)"
 if [ -e "$recorded" ]; then
-  "${tools[@]}" summary "$recorded" --map "$map" --teach-bag "$teach_bag" --repeat-bag "$repeat_bag"
+  "$lf" vtr summary "$recorded" --map "$map" --teach-bag "$teach_bag" --repeat-bag "$repeat_bag"
 else
   echo "vtr_demo: error: nothing was recorded (see $logs/record.log)" >&2
   exit 1

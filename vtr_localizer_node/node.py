@@ -79,11 +79,10 @@ from sensor_msgs.msg import CameraInfo, Image
 from std_srvs.srv import Trigger
 
 from lightfast.config import ConfigError
-from lightfast.errors import LightfastError
+from lightfast.errors import InputError, LightfastError
 from lightfast.geometry import inverse, so3_log
 from lightfast.ros.clock import on_time_jump_back
 from lightfast.ros.convert import (
-    ConversionError,
     image_to_rgb,
     make_header,
     matrix_to_odometry,
@@ -92,6 +91,7 @@ from lightfast.ros.convert import (
     stamp_to_ns,
 )
 from lightfast.ros.diagnostics import Level, ProblemLog, diagnostic_array, diagnostic_status, log_at
+from lightfast.ros.errors import ConversionError
 from lightfast.ros.params import ConfigParameters
 from lightfast.ros.qos import OUTPUT_QOS, sensor_qos
 from lightfast.ros.ready import announce_ready
@@ -113,9 +113,9 @@ from lightfast.topics import (
     VTR_STATUS_TOPIC,
 )
 from lightfast.vtr.color_constant import ColorConstantConfig, image_sources
-from lightfast.vtr.errors import VtrError
+from lightfast.vtr.errors import MapError, VtrError
 from lightfast.vtr.localizer_config import VtrLocalizerConfig
-from lightfast.vtr.map_store import MapError, MapStore, TeachMap
+from lightfast.vtr.map_store import MapStore, TeachMap
 from lightfast.vtr.repeat import RepeatPipeline, RepeatResult
 from lightfast.vtr.stereo import check_projection, check_stereo_pair
 from lightfast.vtr.teach import TeachPipeline, TeachResult
@@ -405,8 +405,8 @@ class VtrLocalizerNode(Node):
     def _process_safely(self, frame: _Frame) -> None:
         try:
             self._process(frame)
-        except (LightfastError, cv2.error) as exc:  # bad input the core refused (VtrInputError), or a core failure
-            level = Level.WARN if isinstance(exc, ValueError) else Level.ERROR
+        except (LightfastError, cv2.error) as exc:  # bad input the core refused (an InputError), or a failed step
+            level = Level.WARN if isinstance(exc, InputError) else Level.ERROR
             self._problem(f"step:{type(exc).__name__}", f"stereo pair {frame.stamp_ns} not processed: {exc}", level,
                           frame.stamp_ns)
 

@@ -1,16 +1,17 @@
-"""Errors of :mod:`lightfast.bag`: every failure to read, write or replay a bag is a :class:`BagError`."""
-from lightfast.errors import LightfastError
+"""Errors of :mod:`lightfast.bag`: every failure to read, write or replay a bag is a :class:`BagError`; all of them
+are :class:`~lightfast.errors.InputError` (a missing, damaged or unsupported bag, an output that exists)."""
+from lightfast.errors import InputError, LightfastError
 
 
 class BagError(LightfastError):
     """Root of the bag errors."""
 
 
-class BagNotFoundError(BagError, FileNotFoundError):
+class BagNotFoundError(BagError, InputError, FileNotFoundError):
     """No bag at the given path."""
 
 
-class BagFormatError(BagError):
+class BagFormatError(BagError, InputError):
     """The bag is unreadable: truncated, corrupt, or of an unsupported storage format or version."""
 
 
@@ -23,9 +24,15 @@ class CorruptChunkError(BagFormatError):
         self.chunk = chunk
 
 
-class UnknownMessageTypeError(BagError):
+class ChunkCheckError(BagFormatError):
+    """Internal to :mod:`lightfast.bag`: an MCAP chunk, its index or the file's summary failed a check (the reason
+    is the message). :mod:`~lightfast.bag.mcap_chunks` raises it and the reader turns it into a skipped chunk, a
+    :class:`CorruptChunkError` or a fallback to rosbags; it does not leave the package."""
+
+
+class UnknownMessageTypeError(BagError, InputError):
     """A message type is not known to this installation (no definition or no Python class for it)."""
 
 
-class BagExistsError(BagError, FileExistsError):
+class BagExistsError(BagError, InputError, FileExistsError):
     """The output bag exists already and overwriting was not requested."""

@@ -32,6 +32,8 @@ import zstandard
 from mcap.exceptions import McapError
 from mcap.reader import SeekingReader
 
+from lightfast.bag.errors import ChunkCheckError
+
 _CHUNK_HEAD = struct.Struct("<BQQQQI")  # opcode, record length, start, end, uncompressed size, crc
 _U32 = struct.Struct("<I")
 _U64 = struct.Struct("<Q")
@@ -108,10 +110,6 @@ def describe_skipped(chunks: Collection[CorruptChunk]) -> str:
     count = f"{n}" if all(c.message_count is not None for c in chunks) else f"at least {n}"
     m = len(chunks)
     return f"skipped {count} message{'s' if n != 1 else ''} in {m} corrupt chunk{'s' if m != 1 else ''}"
-
-
-class ChunkCheckError(Exception):
-    """Internal: a chunk failed a check (the reason is the message)."""
 
 
 @dataclass(frozen=True)

@@ -26,8 +26,15 @@ from rosbags.interfaces import Connection, Qos
 from rosbags.rosbag2 import Reader
 from rosbags.rosbag2.errors import ReaderError
 
-from lightfast.bag.errors import BagError, BagFormatError, BagNotFoundError, CorruptChunkError, UnknownMessageTypeError
-from lightfast.bag.mcap_chunks import ChunkCheckError, CorruptChunk, McapIndex, SkippedChunks, iter_messages, read_index
+from lightfast.bag.errors import (
+    BagError,
+    BagFormatError,
+    BagNotFoundError,
+    ChunkCheckError,
+    CorruptChunkError,
+    UnknownMessageTypeError,
+)
+from lightfast.bag.mcap_chunks import CorruptChunk, McapIndex, SkippedChunks, iter_messages, read_index
 
 log = logging.getLogger(__name__)
 

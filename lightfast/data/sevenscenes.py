@@ -37,7 +37,7 @@ from scipy.spatial.transform import Rotation
 
 from lightfast.bag.writer import BagWriter, make_qos
 from lightfast.camera import PinholeCamera
-from lightfast.errors import LightfastError
+from lightfast.data.errors import DatasetError
 from lightfast.geometry import project_to_so3
 from lightfast.progress import track
 from lightfast.ros.convert import camera_info_from_camera, matrix_to_pose_stamped, numpy_to_image
@@ -58,10 +58,6 @@ log = logging.getLogger(__name__)
 DEFAULT_START_NS = 1_370_088_000 * 10**9
 INVALID_DEPTH_MM = 65535
 _FRAME_RE = re.compile(r"frame-(\d{6})\.color\.(?:jpg|png)$")
-
-
-class DatasetError(LightfastError):
-    """A dataset folder is missing files or holds malformed ones."""
 
 
 @dataclass(frozen=True)

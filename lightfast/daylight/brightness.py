@@ -45,7 +45,7 @@ from scipy.optimize import nnls
 
 from lightfast.camera import PinholeCamera
 from lightfast.daylight.crf import CameraResponse
-from lightfast.errors import LightfastError
+from lightfast.daylight.errors import BrightnessError
 
 if TYPE_CHECKING:
     from lightfast.daylight.lighting_map import LightingMap
@@ -53,7 +53,6 @@ if TYPE_CHECKING:
 __all__ = [
     "COMPONENTS",
     "MIN_REFLECTANCE",
-    "BrightnessError",
     "BrightnessEstimator",
     "RadiosityImages",
     "RelitImage",
@@ -73,10 +72,6 @@ _INIT_LOW, _INIT_HIGH = 2.0, 250.0
 
 F32 = NDArray[np.float32]
 F64 = NDArray[np.float64]
-
-
-class BrightnessError(LightfastError, ValueError):
-    """Invalid input to brightness estimation or relighting (shapes, poses, components, methods)."""
 
 
 # ----------------------------------------------------------------------------------------------------------------

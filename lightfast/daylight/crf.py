@@ -37,11 +37,10 @@ one table for all channels, ``sensitivity`` per unit *radiance*): radiance is ``
 surface, so its sensitivity per unit radiosity is ``sensitivity / π``; with it the scales s_x of §III-C come out in
 the simulator's physical units.
 
-CLI: ``lightfast crf calibrate IMAGES... --exposures T1 T2 ... -o OUT.yaml`` (:func:`main_crf_calibrate`).
+CLI: ``lightfast crf calibrate IMAGES... --exposures T1 T2 ... -o OUT.yaml`` (:func:`calibrate_from_files`).
 """
 from __future__ import annotations
 
-import argparse
 import logging
 import math
 import os
@@ -54,16 +53,15 @@ import numpy as np
 import yaml
 from numpy.typing import ArrayLike, NDArray
 
-from lightfast.errors import LightfastError
+from lightfast.daylight.errors import CrfError
 from lightfast.io import write_text_atomic
 
 __all__ = [
     "CHANNELS",
     "CameraResponse",
-    "CrfError",
     "calibrate_from_bracket",
+    "calibrate_from_files",
     "load_crf",
-    "main_crf_calibrate",
     "save_crf",
 ]
 
@@ -76,10 +74,6 @@ LEVELS = 256
 MAX_VALUE = 255.0
 
 F64 = NDArray[np.float64]
-
-
-class CrfError(LightfastError, ValueError):
-    """A camera response that cannot be built, loaded or calibrated (bad table, bad file, bad bracket)."""
 
 
 def _check_table(table: ArrayLike, name: str = "inverse") -> F64:
@@ -416,40 +410,31 @@ def calibrate_from_bracket(
                           gain=gain)
 
 
-# ----------------------------------------------------------------------------------------------------------------
-# CLI
-
-
-def main_crf_calibrate(argv: Sequence[str] | None = None) -> int:
-    """``lightfast crf calibrate IMAGES... --exposures T1 T2 ... -o OUT.yaml``: calibrate the CRF from an exposure
-    bracket and write it. Returns the exit code; errors raise :class:`CrfError` (the CLI maps them)."""
+def calibrate_from_files(
+    paths: Sequence[str | os.PathLike[str]],
+    exposures_s: Sequence[float],
+    output: str | os.PathLike[str],
+    *,
+    method: Literal["debevec", "robertson"] = "debevec",
+    samples: int = 70,
+    smoothness: float = 10.0,
+    exposure_s: float | None = None,
+    gain: float = 1.0,
+) -> CameraResponse:
+    """Read an exposure bracket from image files (8-bit colour), calibrate it (:func:`calibrate_from_bracket`) and
+    write the response to ``output`` (:func:`save_crf`, described by its images); returns the response. Backs
+    ``lightfast crf calibrate``."""
     import cv2
 
-    parser = argparse.ArgumentParser(prog="lightfast crf calibrate",
-                                     description="Calibrate the camera response function from an exposure bracket "
-                                                 "of a static scene (Debevec or Robertson, OpenCV).")
-    parser.add_argument("images", nargs="+", type=Path, help="images of the same static scene (8-bit colour)")
-    parser.add_argument("--exposures", nargs="+", type=float, required=True, metavar="T",
-                        help="exposure time of each image in seconds, in the same order")
-    parser.add_argument("-o", "--output", type=Path, required=True, help="output YAML file")
-    parser.add_argument("--method", choices=("debevec", "robertson"), default="debevec")
-    parser.add_argument("--samples", type=int, default=70, help="Debevec sample points (default 70)")
-    parser.add_argument("--smoothness", type=float, default=10.0, help="Debevec smoothness λ (default 10)")
-    parser.add_argument("--exposure", type=float, default=None,
-                        help="exposure time to store for later use (default: the median of --exposures)")
-    parser.add_argument("--gain", type=float, default=1.0, help="gain to store (default 1)")
-    args = parser.parse_args(argv)
-    if len(args.images) != len(args.exposures):
-        parser.error(f"{len(args.images)} images but {len(args.exposures)} --exposures")
     images = []
-    for p in args.images:
+    for p in map(Path, paths):
         img = cv2.imread(str(p), cv2.IMREAD_COLOR)
         if img is None:
             raise CrfError(f"cannot read image {p}")
         images.append(img[..., ::-1])
-    crf = calibrate_from_bracket(images, args.exposures, method=args.method, samples=args.samples,
-                                 smoothness=args.smoothness, exposure_s=args.exposure, gain=args.gain)
-    save_crf(crf, args.output, description=f"{args.method} calibration from {len(images)} images: "
-             + ", ".join(f"{p.name}@{t:g}s" for p, t in zip(args.images, args.exposures, strict=True)))
-    log.info("wrote %s", args.output)
-    return 0
+    crf = calibrate_from_bracket(images, exposures_s, method=method, samples=samples, smoothness=smoothness,
+                                 exposure_s=exposure_s, gain=gain)
+    save_crf(crf, output, description=f"{method} calibration from {len(images)} images: "
+             + ", ".join(f"{Path(p).name}@{t:g}s" for p, t in zip(paths, exposures_s, strict=True)))
+    log.info("wrote %s", output)
+    return crf

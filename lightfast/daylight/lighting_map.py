@@ -30,13 +30,13 @@ import scipy.sparse as sp
 from numpy.typing import NDArray
 
 from lightfast.config import Config, ConfigError, config_from_mapping, param
+from lightfast.daylight.errors import LightingMapError, MeshError
 from lightfast.daylight.lights import LightSet, sky_and_ground, sun_disk
-from lightfast.daylight.mesh import MeshError, ReflectanceMesh, load_ply, save_ply
+from lightfast.daylight.mesh import ReflectanceMesh, load_ply, save_ply
 from lightfast.daylight.openings import Opening, openings_array
 from lightfast.daylight.patches import Patches, build_patches
 from lightfast.daylight.radiosity import PatchTransport, direct_irradiance, vertex_radiosity
 from lightfast.daylight.sun import Site
-from lightfast.errors import LightfastError
 from lightfast.io import atomic_directory, load_npz, read_json_mapping, write_text_atomic
 from lightfast.progress import track
 from lightfast.raycast import RayCaster
@@ -46,10 +46,6 @@ log = logging.getLogger(__name__)
 FORMAT_NAME = "lightfast-lighting-map"
 FORMAT_VERSION = 1
 UP = np.array([0.0, 0.0, 1.0])
-
-
-class LightingMapError(LightfastError):
-    """A lighting map that cannot be made or used: bad input, wrong version, mesh mismatch, damaged files."""
 
 
 @dataclass(frozen=True)

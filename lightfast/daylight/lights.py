@@ -16,14 +16,13 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from lightfast.errors import LightfastError
+from lightfast.daylight.errors import LightsError
 from lightfast.geometry import unit_vector
 
 __all__ = [
     "GOLDEN_ANGLE",
     "SUN_ANGULAR_DIAMETER_DEG",
     "LightSet",
-    "LightsError",
     "fibonacci_sphere",
     "sky_and_ground",
     "sun_disk",
@@ -34,10 +33,6 @@ GOLDEN_ANGLE = math.pi * (3.0 - math.sqrt(5.0))
 #: Mean angular diameter of the sun seen from Earth, degrees.
 SUN_ANGULAR_DIAMETER_DEG = 0.533
 _UNIT_TOL = 1e-6
-
-
-class LightsError(LightfastError, ValueError):
-    """Invalid light-set input: wrong shapes, non-unit directions, negative weights, bad sample counts."""
 
 
 @dataclass(frozen=True, eq=False)

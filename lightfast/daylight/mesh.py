@@ -19,12 +19,8 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from lightfast.errors import LightfastError
+from lightfast.daylight.errors import MeshError
 from lightfast.io import write_bytes_atomic
-
-
-class MeshError(LightfastError, ValueError):
-    """A mesh that cannot be used: unreadable file, missing reflectance, degenerate or non-manifold geometry."""
 
 
 @dataclass(frozen=True, eq=False)

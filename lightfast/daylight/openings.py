@@ -34,18 +34,14 @@ import numpy as np
 import yaml
 from numpy.typing import ArrayLike, NDArray
 
-from lightfast.errors import LightfastError
+from lightfast.daylight.errors import OpeningsError
 from lightfast.io import read_versioned_yaml, write_text_atomic
 
-__all__ = ["Opening", "OpeningsError", "load_openings", "openings_array", "save_openings", "through_openings"]
+__all__ = ["Opening", "load_openings", "openings_array", "save_openings", "through_openings"]
 
 FORMAT_NAME = "lightfast-openings"
 FORMAT_VERSION = 1
 _PLANE_TOLERANCE_M = 1e-3  # a ray starting this close to an opening's plane (e.g. on its sill) starts in it
-
-
-class OpeningsError(LightfastError, ValueError):
-    """An openings file or opening that cannot be used."""
 
 
 @dataclass(frozen=True)

@@ -28,8 +28,9 @@ import scipy.sparse as sp
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
+from lightfast.daylight.errors import MeshError
 from lightfast.daylight.lights import fibonacci_sphere
-from lightfast.daylight.mesh import MeshError, ReflectanceMesh
+from lightfast.daylight.mesh import ReflectanceMesh
 
 
 @dataclass(frozen=True, eq=False)

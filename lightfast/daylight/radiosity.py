@@ -34,19 +34,15 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from lightfast.daylight.errors import RadiosityError
 from lightfast.daylight.lights import LightSet
 from lightfast.daylight.mesh import ReflectanceMesh
 from lightfast.daylight.openings import through_openings
 from lightfast.daylight.patches import Patches
-from lightfast.errors import LightfastError
 from lightfast.progress import track
 from lightfast.raycast import RayCaster
 
 log = logging.getLogger(__name__)
-
-
-class RadiosityError(LightfastError):
-    """The transport could not be computed (e.g. the iteration diverged)."""
 
 
 def direct_irradiance(

@@ -34,7 +34,6 @@ from lightfast.config import param
 from lightfast.daylight.brightness import (
     COMPONENTS,
     MIN_REFLECTANCE,
-    BrightnessError,
     BrightnessEstimator,
     RadiosityImages,
     _grid_rays,
@@ -42,6 +41,7 @@ from lightfast.daylight.brightness import (
 )
 from lightfast.daylight.brightness import warm_up as warm_up_brightness
 from lightfast.daylight.crf import CameraResponse
+from lightfast.daylight.errors import BrightnessError
 from lightfast.daylight.lighting_map import LightingMap
 from lightfast.node_options import SensorInputOptions, StampOptions
 

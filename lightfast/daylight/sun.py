@@ -41,15 +41,13 @@ import yaml
 from numpy.typing import ArrayLike, NDArray
 
 from lightfast.config import Config, ConfigError, field_specs, param
-from lightfast.errors import LightfastError
+from lightfast.daylight.errors import SiteError, SunPositionError
 from lightfast.io import write_text_atomic
 
 __all__ = [
     "FREIBURG",
     "Site",
-    "SiteError",
     "SunPosition",
-    "SunPositionError",
     "TimeLike",
     "enu_to_map",
     "sun_position",
@@ -62,17 +60,6 @@ TimeLike = dt.datetime | pd.Timestamp | pd.DatetimeIndex | np.datetime64 | NDArr
 ATMOS_REFRACT_DEG = 0.5667
 
 _EPOCH = dt.datetime(1970, 1, 1, tzinfo=dt.UTC)
-
-
-class SiteError(ConfigError):
-    """An invalid site: a value out of range, an unknown time zone, or an unreadable or malformed site file.
-
-    A :class:`~lightfast.config.ConfigError`, hence a :class:`~lightfast.errors.LightfastError` and a ``ValueError``.
-    """
-
-
-class SunPositionError(LightfastError, ValueError):
-    """Times :func:`sun_position` cannot use: naive datetimes, NaT, a non-finite ``delta_t_s``."""
 
 
 @dataclass(frozen=True)

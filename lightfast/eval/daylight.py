@@ -44,14 +44,14 @@ from lightfast.daylight.lighting_map import LightingMap, LightingMapConfig
 from lightfast.daylight.relight import DaylightRelighter, RelightConfig
 from lightfast.daylight.sun import sun_position
 from lightfast.daylight.sun_update import sun_radiosity
-from lightfast.errors import LightfastError
+from lightfast.eval.errors import DaylightEvalError
 from lightfast.geometry import rotation_angle_deg
 from lightfast.io import write_text_atomic
 from lightfast.progress import track
 from lightfast.topics import COLOR_INFO_TOPIC, COLOR_TOPIC, DEPTH_TOPIC, GT_POSE_TOPIC
 from lightfast.tracking.pipeline import RGBDTracker, TrackerConfig
 
-__all__ = ["METHODS", "EvalError", "FrameRecord", "SequenceRun", "evaluate_daylight", "run_sequence"]
+__all__ = ["METHODS", "FrameRecord", "SequenceRun", "evaluate_daylight", "run_sequence"]
 
 log = logging.getLogger(__name__)
 
@@ -67,10 +67,6 @@ METHODS: dict[str, tuple[str, str, str]] = {
 PROTOCOL_VERSION = 3
 LOSS_TRANSLATION_M = 0.10
 LOSS_ROTATION_DEG = 10.0
-
-
-class EvalError(LightfastError):
-    """An evaluation input is missing or inconsistent (recording directory, lighting map, method name)."""
 
 
 @dataclass(frozen=True)
@@ -141,8 +137,8 @@ def _sequence_files(seq_dir: Path) -> dict[str, Path]:
     files = {"bag": seq_dir / "bag", "crf": seq_dir / "camera.yaml", "info": seq_dir / "sequence.json"}
     missing = [str(p) for p in files.values() if not p.exists()]
     if missing:
-        raise EvalError(f"{seq_dir} is not a complete daylight recording (missing {', '.join(missing)}); "
-                        f"make it with `lightfast sim daylight`")
+        raise DaylightEvalError(f"{seq_dir} is not a complete daylight recording (missing {', '.join(missing)}); "
+                                f"make it with `lightfast sim daylight`")
     return files
 
 
@@ -159,7 +155,7 @@ def run_sequence(seq_dir: Path, lmap: LightingMap, method: str, *, max_frames: i
                  tracker_config: TrackerConfig | None = None) -> SequenceRun:
     """Run one method over one recording with the §IV-C protocol (see the module docstring)."""
     if method not in METHODS:
-        raise EvalError(f"unknown method {method!r}; choose from {', '.join(METHODS)}")
+        raise DaylightEvalError(f"unknown method {method!r}; choose from {', '.join(METHODS)}")
     files = _sequence_files(seq_dir)
     mode, reference, brightness = METHODS[method]
     info = json.loads(files["info"].read_text())
@@ -198,7 +194,8 @@ def run_sequence(seq_dir: Path, lmap: LightingMap, method: str, *, max_frames: i
         run.T_est.append(res.T_map_cam)
         run.T_gt.append(T_gt)
     if not run.frames:
-        raise EvalError(f"{seq_dir}: no complete frames (colour + depth + camera_info + ground truth) in the bag")
+        raise DaylightEvalError(f"{seq_dir}: no complete frames (colour + depth + camera_info + ground truth) in "
+                                "the bag")
     return run
 
 
@@ -221,10 +218,10 @@ def _lighting_map(scene: str, sim_dir: Path, maps_dir: Path, progress: bool,
     if out.exists():
         lmap = LightingMap.load(out)
         if lmap.mesh.content_hash != load_ply(mesh_path).content_hash:
-            raise EvalError(f"{out} was prepared for another {scene} mesh; remove it to prepare it again")
+            raise DaylightEvalError(f"{out} was prepared for another {scene} mesh; remove it to prepare it again")
         if not np.array_equal(lmap.openings, openings_array(openings)):
-            raise EvalError(f"{out} was prepared with other window openings than {openings_path}; remove it to "
-                            "prepare it again")
+            raise DaylightEvalError(f"{out} was prepared with other window openings than {openings_path}; remove it "
+                                    "to prepare it again")
         return lmap
     log.info("preparing the lighting map of %s into %s", scene, out)
     lmap = prepare_lighting_map(load_ply(mesh_path), Site.from_yaml(site_path), config or LightingMapConfig(),
@@ -357,16 +354,16 @@ def evaluate_daylight(sim_dir: Path, out_dir: Path, *, methods: Sequence[str] = 
     ``daylight_summary.json`` and PNG plots into ``out_dir``."""
     for m in methods:
         if m not in METHODS:
-            raise EvalError(f"unknown method {m!r}; choose from {', '.join(METHODS)}")
+            raise DaylightEvalError(f"unknown method {m!r}; choose from {', '.join(METHODS)}")
     seq_dirs = sorted(p for p in sim_dir.iterdir() if (p / "sequence.json").exists()) if sim_dir.is_dir() else []
     if sequences:
         wanted = set(sequences)
         seq_dirs = [p for p in seq_dirs if p.name in wanted]
         missing = wanted - {p.name for p in seq_dirs}
         if missing:
-            raise EvalError(f"recordings not found in {sim_dir}: {', '.join(sorted(missing))}")
+            raise DaylightEvalError(f"recordings not found in {sim_dir}: {', '.join(sorted(missing))}")
     if not seq_dirs:
-        raise EvalError(f"no recordings in {sim_dir} (make them with `lightfast sim daylight {sim_dir}`)")
+        raise DaylightEvalError(f"no recordings in {sim_dir} (make them with `lightfast sim daylight {sim_dir}`)")
     maps_dir = maps_dir or sim_dir / "maps"
     out_dir.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
@@ -514,27 +511,3 @@ def _cached_sun(seq: Path, lmap: LightingMap) -> NDArray[np.float32]:
     if seq.name not in _SUNS:
         _SUNS[seq.name] = sequence_sun_radiosity(seq, lmap)
     return _SUNS[seq.name]
-
-
-def main_eval_daylight(argv: Sequence[str] | None = None) -> int:
-    """``lightfast eval daylight SIM_DIR OUT``: the Table I evaluation (see the module docstring)."""
-    import argparse
-    import sys
-
-    p = argparse.ArgumentParser(prog="lightfast eval daylight", description=__doc__.split("\n\n")[0])
-    p.add_argument("sim_dir", type=Path, help="directory of recordings made by `lightfast sim daylight`")
-    p.add_argument("out", type=Path, help="output directory for the table, CSV, JSON and plots")
-    p.add_argument("--methods", default=",".join(METHODS), help=f"comma-separated subset of {', '.join(METHODS)}")
-    p.add_argument("--sequences", default="", help="comma-separated recordings (default: all in SIM_DIR)")
-    p.add_argument("--maps", type=Path, default=None, help="lighting map cache directory (default SIM_DIR/maps)")
-    p.add_argument("--max-frames", type=int, default=None, help="evaluate only the first N frames of each recording")
-    p.add_argument("--jobs", type=int, default=1, help="parallel worker processes (one recording x method each)")
-    args = p.parse_args(argv)
-    methods = [m for m in args.methods.split(",") if m]
-    sequences = [s for s in args.sequences.split(",") if s] or None
-    progress = sys.stderr.isatty()
-    runs = evaluate_daylight(args.sim_dir, args.out, methods=methods, sequences=sequences, maps_dir=args.maps,
-                             max_frames=args.max_frames, progress=progress, jobs=args.jobs)
-    print((args.out / "daylight_table.md").read_text(), end="")
-    print(f"{len(runs)} runs; wrote {args.out}")
-    return 0

@@ -65,14 +65,12 @@ it is scored.
 """
 from __future__ import annotations
 
-import argparse
 import csv
 import hashlib
 import io
 import json
 import logging
 import math
-import sys
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field, replace
@@ -83,7 +81,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from lightfast.config import Config, param
-from lightfast.errors import LightfastError
+from lightfast.eval.errors import RacrEvalError
 from lightfast.geometry import inverse, make_transform, rotation_angle_deg, so3_exp
 from lightfast.io import write_text_atomic
 from lightfast.progress import track
@@ -102,16 +100,15 @@ from lightfast.racr import (
     initialize,
     relative_motions,
 )
-from lightfast.sim.racr_platform import PlatformError, PlatformSimulator, VseObservation, VseStandIn
+from lightfast.sim.errors import PlatformError
+from lightfast.sim.racr_platform import PlatformSimulator, VseObservation, VseStandIn
 
 __all__ = [
     "LIGHTINGS",
     "METHODS",
     "RacrEvalConfig",
-    "RacrEvalError",
     "RunRecord",
     "evaluate_racr",
-    "main_eval_racr",
     "run_one",
 ]
 
@@ -134,10 +131,6 @@ LIGHTINGS = ("similar", "varied")
 ABLATION = ("racr", "racr-p", "racr-f", "racr-s")
 PROTOCOL_VERSION = 2
 AFD_SUCCESS_PX = 3.0
-
-
-class RacrEvalError(LightfastError):
-    """An evaluation input is missing or inconsistent (scene directory, method or lighting name, option)."""
 
 
 @dataclass(frozen=True)
@@ -1005,65 +998,3 @@ def run_convergence_study(scenes_dir: Path, out_dir: Path, scene: str = "S01", *
     fig.savefig(out_dir / "racr_convergence_condition.png", dpi=110)
     plt.close(fig)
     return path
-
-
-# ------------------------------------------------------------------------------------------------------------
-# CLI
-
-
-def _csv_list(text: str) -> list[str]:
-    return [x for x in text.replace(" ", ",").split(",") if x]
-
-
-def main_eval_racr(argv: Sequence[str] | None = None) -> int:
-    """``lightfast eval racr SCENES_DIR OUT``: the rACR evaluation (see the module documentation)."""
-    p = argparse.ArgumentParser(
-        prog="lightfast eval racr",
-        description="rACR vs ACR and the ablations on the simulated scenes (paper §5: Tables 2, 4, 5, Fig. 8, "
-                    "Fig. 12(b)), in simulated time. Resumable: runs already recorded in OUT/runs are skipped.")
-    p.add_argument("scenes_dir", type=Path, help="directory of scenes made by `lightfast sim racr`")
-    p.add_argument("out", type=Path, help="output directory (runs/, racr_table.md, racr_runs.csv, racr_summary.json, "
-                   "racr_parallel_serial.md, racr_convergence.png, racr_ablation.png)")
-    p.add_argument("--methods", default=",".join(METHODS), help=f"comma-separated subset of {', '.join(METHODS)}")
-    p.add_argument("--scenes", nargs="*", default=None, metavar="NAME", help="scenes, e.g. S01 S14 (default all)")
-    p.add_argument("--lighting", default="varied", help="comma-separated: similar, varied (default varied)")
-    p.add_argument("--repeats", type=int, default=1, help="repeats per scene; repeat r>0 draws a new initial pose")
-    p.add_argument("--jobs", type=int, default=1, help="parallel worker processes (one run each)")
-    p.add_argument("--max-runs", type=int, default=None, help="do at most this many missing runs, then stop")
-    p.add_argument("--job-cost", choices=("paper", "measured"), default="paper",
-                   help="simulated alignment durations: the paper's (fast 0.2 s, fine 5 s) or measured CPU time")
-    p.add_argument("--eta", type=float, default=RacrEvalConfig().eta, help="stop threshold of g (see module notes)")
-    p.add_argument("--handeye-error-deg", type=float, default=0.0,
-                   help="inject this rotation error into the estimated hand-eye X (section 3.7 study)")
-    p.add_argument("--convergence-condition", metavar="SCENE", default=None,
-                   help="instead of the evaluation: the section 3.7 study (hand-eye rotation errors 10..80 deg) on "
-                   "SCENE, written to OUT/racr_convergence_condition.{md,json,png}")
-    p.add_argument("--full-errors", default="",
-                   help="with --convergence-condition: also run full rACR with these injected errors, e.g. 20,40,60")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
-    args = p.parse_args(argv)
-    if args.convergence_condition:
-        try:
-            path = run_convergence_study(args.scenes_dir, args.out, args.convergence_condition,
-                                         full_errors=[float(x) for x in _csv_list(args.full_errors)],
-                                         lighting=(_csv_list(args.lighting) or ["varied"])[0])
-        except (RacrEvalError, LightfastError, ValueError) as exc:
-            print(f"lightfast eval racr: error: {exc}", file=sys.stderr)
-            return 2
-        print(path.read_text(), end="")
-        return 0
-    try:
-        scenes = [s for x in (args.scenes or []) for s in _csv_list(x)] or None
-        config = RacrEvalConfig(job_cost=args.job_cost, eta=args.eta, handeye_error_deg=args.handeye_error_deg)
-        runs = evaluate_racr(args.scenes_dir, args.out, methods=_csv_list(args.methods), scenes=scenes,
-                             lightings=_csv_list(args.lighting), repeats=args.repeats, config=config, jobs=args.jobs,
-                             progress=not args.no_progress and sys.stderr.isatty(), max_runs=args.max_runs)
-    except (RacrEvalError, ValueError) as exc:
-        print(f"lightfast eval racr: error: {exc}", file=sys.stderr)
-        return 2
-    table = args.out / "racr_table.md"
-    if table.exists():
-        print(table.read_text(), end="")
-    print(f"{len(runs)} runs recorded; wrote {args.out}")
-    return 0
-

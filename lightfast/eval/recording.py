@@ -25,8 +25,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from lightfast.bag.reader import open_bag
-from lightfast.errors import LightfastError
 from lightfast.eval.daylight import LOSS_ROTATION_DEG, LOSS_TRANSLATION_M
+from lightfast.eval.errors import RecordingError
 from lightfast.geometry import rotation_angle_deg
 from lightfast.topics import (
     COLOR_TOPIC,
@@ -43,10 +43,6 @@ __all__ = ["PLAY_RESTART_S", "RecordingScore", "play_windows", "score_recording"
 PLAY_RESTART_S = 1.0
 STAGES = {"f2f": ("tracker", "f2f_ms"), "rendering": ("relight", "render_ms"),
           "estimation": ("relight", "estimate_ms"), "f2m": ("tracker", "f2m_ms")}
-
-
-class RecordingError(LightfastError):
-    """A recording cannot be scored (missing topics, no poses)."""
 
 
 @dataclass
@@ -183,21 +179,3 @@ def score_recording(recorded: Path, truth: Path, window: tuple[int, int] | None 
         frames=frames, poses=len(errors), f2m=int(f2m), rmse_m=rmse, loss_ratio=float(1.0 - ok.mean()),
         fps=(len(receive_s) - 1) / span if span > 0 else math.nan, latency_ms=np.array(latency),
         stages_ms={k: np.array(v) for k, v in stages.items()}, sun_chunks=len(during), sun_epochs=len(set(during)))
-
-
-def main_eval_recording(argv: list[str] | None = None) -> int:
-    """``lightfast eval recording RECORDED --truth BAG``."""
-    import argparse
-
-    p = argparse.ArgumentParser(prog="lightfast eval recording", description=__doc__.split("\n\n")[0])
-    p.add_argument("recorded", type=Path, help="bag recorded from the running nodes")
-    p.add_argument("--truth", type=Path, required=True, help="the bag that was played (with ground truth poses)")
-    args = p.parse_args(argv)
-    windows = play_windows(args.recorded)
-    if len(windows) == 1:
-        print(score_recording(args.recorded, args.truth).summary(), end="")
-        return 0
-    for i, window in enumerate(windows, 1):  # the bag was played several times: each play on its own
-        print(f"== play {i} of {len(windows)}")
-        print(score_recording(args.recorded, args.truth, window).summary(), end="")
-    return 0

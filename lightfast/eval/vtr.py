@@ -56,7 +56,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from lightfast.bag.reader import open_bag
-from lightfast.errors import LightfastError
+from lightfast.eval.errors import VtrEvalError
 from lightfast.geometry import quat_to_matrix, rotation_angle_deg
 from lightfast.io import write_text_atomic
 from lightfast.progress import track
@@ -70,9 +70,7 @@ __all__ = [
     "GROSS_ERROR_M",
     "FrameRecord",
     "RepeatRun",
-    "VtrEvalError",
     "evaluate_vtr",
-    "main_eval_vtr",
     "run_repeat",
     "teach_map",
 ]
@@ -89,10 +87,6 @@ REPORTED_SOURCES = ("grey", "fv", "fr")
 FIG7_RUNS = ("repeat04", "repeat07")
 _STEREO_TOPICS = ("/stereo/left/image_raw", "/stereo/right/image_raw", "/stereo/left/camera_info",
                   "/stereo/right/camera_info")
-
-
-class VtrEvalError(LightfastError):
-    """An evaluation input is missing or inconsistent (simulation directory, run, mode)."""
 
 
 # ----------------------------------------------------------------------------------------------------------------
@@ -805,57 +799,3 @@ def evaluate_vtr(sim_dir: Path, out_dir: Path, *, modes: Sequence[str] = MODES, 
     meta.update(generated=time.strftime("%Y-%m-%dT%H:%M:%S%z"), seconds=time.perf_counter() - t0)
     write_outputs(out_dir, results, modes, order, meta=meta, limit_m=limit, min_inliers=min_inliers)
     return results
-
-
-def main_eval_vtr(argv: Sequence[str] | None = None) -> int:
-    """``lightfast eval vtr SIM_DIR OUT``: the Table I / Fig. 7 evaluation (see the module docstring)."""
-    import argparse
-    import sys
-
-    p = argparse.ArgumentParser(
-        prog="lightfast eval vtr",
-        description="Colour-constant VT&R on the simulated day schedule (paper §VI): teach once from the teach run, "
-                    "repeat every repeat run in every mode through the node's pipeline, and report autonomy by "
-                    "distance (Table I), the distance driven on VO (Fig. 7 CDFs) and the localization error against "
-                    "the ground truth. Finished (run, mode) results are kept in OUT/runs and reused when started "
-                    "again; the outputs are rewritten after every run.")
-    p.add_argument("sim_dir", type=Path, help="directory written by `lightfast sim vtr` (a teach run + repeats)")
-    p.add_argument("out", type=Path, help="output directory: vtr_table.md, vtr_runs.csv, vtr_frames.csv, "
-                   "vtr_summary.json, vtr_cdf.png, vtr_cdf_fig7.png, vtr_inliers.png")
-    p.add_argument("--modes", default=",".join(MODES), help=f"comma-separated subset of {', '.join(MODES)} "
-                   "(default: all)")
-    p.add_argument("--runs", nargs="+", metavar="NAME", help="repeat runs to evaluate (default: all in SIM_DIR)")
-    p.add_argument("--maps", type=Path, default=None, help="teach map cache (default SIM_DIR/vtr_maps)")
-    p.add_argument("--keep", type=Path, default=None, help="where finished (run, mode) results are kept for a "
-                   "restart (default OUT/runs)")
-    p.add_argument("--max-frames", type=int, default=None, help="evaluate only the first N frames of each repeat")
-    p.add_argument("--jobs", type=int, default=1, help="parallel worker processes, one (run, mode) each (default 1)")
-    p.add_argument("--workers", type=int, default=1, help="threads of each pipeline's stereo front end (default 1)")
-    p.add_argument("--initial-keyframe", type=int, default=-1, help="keyframe where every repeat starts (default -1, "
-                   "the node's default: search the whole map for the first localization; 0: the repeat starts at "
-                   "the start of the taught path, as in a field trial)")
-    p.add_argument("--force", action="store_true", help="re-evaluate (run, mode) pairs kept from an earlier call")
-    p.add_argument("--report-only", action="store_true", help="evaluate nothing: write the outputs from the kept "
-                   "results (missing (run, mode) pairs show as —)")
-    p.add_argument("--no-progress", action="store_true", help="no progress bars")
-    args = p.parse_args(argv)
-    modes = [m for m in args.modes.split(",") if m]
-    if args.max_frames is not None and args.max_frames < 1:
-        p.error("--max-frames must be >= 1")
-    if args.jobs < 1:
-        p.error("--jobs must be >= 1")
-    try:
-        config = VtrLocalizerConfig(workers=args.workers, initial_keyframe=args.initial_keyframe)
-    except LightfastError as exc:
-        p.error(str(exc))
-    log.setLevel(logging.INFO)  # one line per finished run (the lightfast CLI's handler prints it)
-    progress = sys.stderr.isatty() and not args.no_progress
-    try:
-        results = evaluate_vtr(args.sim_dir, args.out, modes=modes, runs=args.runs, maps_dir=args.maps,
-                               keep_dir=args.keep, config=config, max_frames=args.max_frames, jobs=args.jobs,
-                               progress=progress, force=args.force, report_only=args.report_only)
-    except OSError as exc:
-        raise VtrEvalError(str(exc)) from exc
-    print((args.out / "vtr_table.md").read_text(), end="")
-    print(f"{len(results)} (run, mode) results; wrote {args.out}")
-    return 0

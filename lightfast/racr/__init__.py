@@ -22,7 +22,6 @@ from lightfast.racr.acr_baseline import (
     BISECTION_RULES,
     AcrBaseline,
     AcrConfig,
-    AcrError,
     AcrStep,
     RelativePose,
     relative_pose,
@@ -37,11 +36,13 @@ from lightfast.racr.adjustment import (
     motion_gap,
 )
 from lightfast.racr.errors import (
+    AcrError,
     AdjustmentError,
     AlignmentError,
     DegenerateMotionError,
     InitializationError,
     RacrError,
+    SchemeError,
 )
 from lightfast.racr.fast_alignment import (
     FastAlignmentConfig,
@@ -66,15 +67,7 @@ from lightfast.racr.initialization import (
     real_scale,
     relative_motions,
 )
-from lightfast.racr.scheme import (
-    SCHEME_MODES,
-    SCHEME_STAGES,
-    AlignmentJob,
-    RacrScheme,
-    SchemeConfig,
-    SchemeError,
-    SchemeStatus,
-)
+from lightfast.racr.scheme import SCHEME_MODES, SCHEME_STAGES, AlignmentJob, RacrScheme, SchemeConfig, SchemeStatus
 
 __all__ = [
     "BISECTION_RULES",

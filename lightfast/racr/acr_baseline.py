@@ -37,13 +37,12 @@ from numpy.typing import ArrayLike, NDArray
 from lightfast.camera import PinholeCamera
 from lightfast.config import Config, param
 from lightfast.geometry import project_to_so3, rotation_angle_deg
-from lightfast.racr.errors import RacrError
+from lightfast.racr.errors import AcrError
 
 __all__ = [
     "BISECTION_RULES",
     "AcrBaseline",
     "AcrConfig",
-    "AcrError",
     "AcrStep",
     "RelativePose",
     "relative_pose",
@@ -56,10 +55,6 @@ Array = NDArray[np.float64]
 
 BISECTION_RULES = ("direction", "feature_displacement")
 _MIN_5POINT = 5
-
-
-class AcrError(RacrError):
-    """The ACR baseline cannot estimate a relative pose: bad images, too few SIFT matches or RANSAC inliers."""
 
 
 @dataclass(frozen=True)

@@ -58,7 +58,7 @@ from numpy.typing import ArrayLike, NDArray
 from lightfast.config import Config, param
 from lightfast.geometry import make_transform, so3_exp
 from lightfast.racr.adjustment import AdjustmentConfig, AdjustmentStep, _inverse, _rigid, adjustment_step
-from lightfast.racr.errors import AlignmentError, RacrError
+from lightfast.racr.errors import AlignmentError, RacrError, SchemeError
 from lightfast.racr.fast_alignment import (
     FastAlignmentConfig,
     FastAlignmentResult,
@@ -74,7 +74,6 @@ __all__ = [
     "AlignmentJob",
     "RacrScheme",
     "SchemeConfig",
-    "SchemeError",
     "SchemeStatus",
 ]
 
@@ -120,11 +119,6 @@ def finite_vse_cloud(points: ArrayLike, intensities: ArrayLike | None) -> tuple[
             f"the VSE cloud has {len(pts)} finite points (of {len(ok)}); at least {_MIN_POINTS} are needed"
         )
     return pts, inten, ok
-
-
-class SchemeError(RacrError):
-    """The alignment thread stopped on an unexpected error (the original is the ``__cause__``), or the scheme was
-    used out of order (started twice, stepped while its thread runs)."""
 
 
 @dataclass(frozen=True)

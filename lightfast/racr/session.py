@@ -238,7 +238,7 @@ class RacrSession:
     # ------------------------------------------------------------------ lifecycle
     def stop(self, timeout: float | None = 30.0) -> None:
         """Stop the scheme's alignment thread (if it runs); re-raises an error that stopped it
-        (:class:`~lightfast.racr.scheme.SchemeError`)."""
+        (:class:`~lightfast.racr.errors.SchemeError`)."""
         scheme = self._scheme
         if scheme is not None:
             scheme.stop(timeout)
@@ -323,7 +323,7 @@ class RacrSession:
         """The next hand motion to execute, or None (waiting for the platform or the VSE, aligning, converged,
         failed). Call it periodically; a returned command must be executed (its stop reported) before the next.
         Once the scheme reported convergence (g ≤ η) the run is over: no further motion is issued. Re-raises, as
-        :class:`~lightfast.racr.scheme.SchemeError`, an error that stopped the alignment thread."""
+        :class:`~lightfast.racr.errors.SchemeError`, an error that stopped the alignment thread."""
         with self._lock:
             scheme = self._scheme
             if scheme is None:

@@ -37,8 +37,15 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial.transform import Rotation
 
-from lightfast.camera import CameraModelError, PinholeCamera
-from lightfast.errors import LightfastError
+from lightfast.camera import PinholeCamera
+from lightfast.errors import CameraModelError
+from lightfast.ros.errors import (
+    CameraInfoError,
+    ConversionError,
+    ImageConversionError,
+    PointCloudConversionError,
+    PoseConversionError,
+)
 from lightfast.ros.msgtypes import RCLPY, MessageTypes
 
 __all__ = [
@@ -47,16 +54,11 @@ __all__ = [
     "QUATERNION_NORM_TOLERANCE",
     "ROTATION_TOLERANCE",
     "SUPPORTED_DISTORTION_MODELS",
-    "CameraInfoError",
     "CameraInfoReader",
-    "ConversionError",
-    "ImageConversionError",
     "ImageEncoding",
     "ImageFields",
     "PointCloud2Fields",
-    "PointCloudConversionError",
     "PointFieldSpec",
-    "PoseConversionError",
     "camera_from_camera_info",
     "camera_info_from_camera",
     "image_fields",
@@ -78,27 +80,6 @@ __all__ = [
     "stamp_to_ns",
     "xyz_to_pointcloud2",
 ]
-
-
-class ConversionError(LightfastError, ValueError):
-    """A message cannot be converted (malformed or unsupported); the message names the offending field."""
-
-
-class ImageConversionError(ConversionError):
-    """A malformed or unsupported ``sensor_msgs/Image`` or image array."""
-
-
-class PointCloudConversionError(ConversionError):
-    """A malformed or unsupported ``sensor_msgs/PointCloud2`` or point array."""
-
-
-class PoseConversionError(ConversionError):
-    """A non-unit quaternion, a matrix that is not a rigid transform, or a badly shaped pose array."""
-
-
-class CameraInfoError(ConversionError):
-    """A ``sensor_msgs/CameraInfo`` that :class:`~lightfast.camera.PinholeCamera` cannot represent."""
-
 
 _NS_PER_S = 1_000_000_000
 _INT32_MIN, _INT32_MAX = -(2**31), 2**31 - 1

@@ -14,13 +14,9 @@ import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from lightfast.errors import LightfastError
+from lightfast.ros.errors import DomainExhaustedError
 
 MAX_DOMAIN_ID = 232
-
-
-class DomainExhaustedError(LightfastError):
-    """Every domain id in the range is held by another process."""
 
 
 @dataclass

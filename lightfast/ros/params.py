@@ -1,13 +1,13 @@
 """ROS parameters generated from a configuration dataclass (see :mod:`lightfast.config`).
 
-:func:`declare_config` declares one parameter per field with its description, bounds and read-only flag, reads
+:func:`declare_config` declares one parameter per field with its description, bounds and read-only flag (a
+section's fields as dotted parameters, ``stereo.max_features``, read-only when the section is), reads
 the values (defaults, ``--ros-args -p``, or a ``--params-file`` made by ``lightfast config write``) and returns the
 validated dataclass. :class:`ConfigParameters` also validates run-time changes: a ``ros2 param set`` that the
 dataclass rejects is refused with the validation message, an accepted one updates :attr:`ConfigParameters.config`.
 """
 from __future__ import annotations
 
-import dataclasses
 import difflib
 from collections.abc import Callable
 from typing import Any, Generic, TypeVar
@@ -17,7 +17,7 @@ from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValu
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
-from lightfast.config import Config, ConfigError, FieldSpec, config_from_mapping, field_specs
+from lightfast.config import Config, ConfigError, FieldSpec, config_from_mapping, field_specs, replace_config
 
 C = TypeVar("C", bound=Config)
 
@@ -35,8 +35,25 @@ _SCALAR_TYPES = {
 }
 
 
-def _descriptor(spec: FieldSpec) -> ParameterDescriptor:
-    desc = ParameterDescriptor(description=spec.describe(), read_only=spec.read_only)
+def _leaves(cls: type[C]) -> list[tuple[str, FieldSpec, Any, bool]]:
+    """``(dotted name, spec, default, read_only)`` of every parameter of ``cls``: a section's fields are dotted
+    parameters whose defaults are the section default's values, read-only when the section is."""
+    out = []
+
+    def walk(config_cls: type, default: Any, prefix: str, read_only: bool) -> None:
+        for spec in field_specs(config_cls):
+            value = getattr(default, spec.name) if default is not None else spec.default
+            if spec.is_section:
+                walk(spec.scalar_type, value, f"{prefix}{spec.name}.", read_only or spec.read_only)
+            else:
+                out.append((prefix + spec.name, spec, value, read_only or spec.read_only))
+
+    walk(cls, None, "", False)
+    return out
+
+
+def _descriptor(spec: FieldSpec, read_only: bool = False) -> ParameterDescriptor:
+    desc = ParameterDescriptor(description=spec.describe(), read_only=spec.read_only or read_only)
     if spec.choices is not None:
         desc.additional_constraints = "one of: " + ", ".join(map(str, spec.choices))
     has_bounds = spec.min is not None and spec.max is not None
@@ -63,28 +80,29 @@ def declare_config(node: Node, cls: type[C]) -> C:
     Raises :class:`~lightfast.config.ConfigError` naming the parameter when a value is invalid.
     """
     values = {}
-    for spec in field_specs(cls):
-        default = list(spec.default) if spec.is_tuple else spec.default
+    for name, spec, value, read_only in _leaves(cls):
+        default = list(value) if spec.is_tuple else value
+        descriptor = _descriptor(spec, read_only)
         try:
             if spec.is_tuple and not default:
                 # an empty list carries no type: declare the type explicitly
-                param = node.declare_parameter(spec.name, _ARRAY_TYPES[spec.scalar_type], _descriptor(spec))
+                param = node.declare_parameter(name, _ARRAY_TYPES[spec.scalar_type], descriptor)
             else:
-                param = node.declare_parameter(spec.name, default, _descriptor(spec))
+                param = node.declare_parameter(name, default, descriptor)
         except InvalidParameterTypeException as exc:  # e.g. `-p period_s:=60` for a double: rclpy's traceback
-            raise ConfigError(_type_message(node, spec, exc)) from None
+            raise ConfigError(_type_message(node, name, spec, exc)) from None
         except InvalidParameterValueException as exc:  # outside the descriptor's range
-            raise ConfigError(f"node {node.get_name()}: invalid parameter {spec.name}: {exc}") from None
-        values[spec.name] = _from_ros(spec, param.value)
+            raise ConfigError(f"node {node.get_name()}: invalid parameter {name}: {exc}") from None
+        values[name] = _from_ros(spec, param.value)
     try:
         return config_from_mapping(cls, values)
     except ConfigError as exc:
         raise ConfigError(f"node {node.get_name()}: invalid parameter: {exc}") from None
 
 
-def _type_message(node: Node, spec: FieldSpec, exc: InvalidParameterTypeException) -> str:
+def _type_message(node: Node, name: str, spec: FieldSpec, exc: InvalidParameterTypeException) -> str:
     expected = _ARRAY_TYPES[spec.scalar_type] if spec.is_tuple else _SCALAR_TYPES[spec.scalar_type]
-    message = f"node {node.get_name()}: parameter {spec.name} must be of type {expected.name.lower()} ({exc.args[0]})"
+    message = f"node {node.get_name()}: parameter {name} must be of type {expected.name.lower()} ({exc.args[0]})"
     if expected in (Parameter.Type.DOUBLE, Parameter.Type.DOUBLE_ARRAY) and "INTEGER" in str(exc.args[0]):
         message += "; write a double with a decimal point, e.g. 60.0 instead of 60"
     return message
@@ -105,14 +123,14 @@ class ConfigParameters(Generic[C]):
             unknown = "; ".join(_unknown_text(n, c) for n, c in unknown_parameters(node).items())
             raise ConfigError(f"{exc}" + (f" ({unknown})" if unknown else "")) from None
         report_unknown_parameters(node)
-        self._specs = {s.name: s for s in field_specs(cls)}
+        self._specs = {name: spec for name, spec, _, _ in _leaves(cls)}
         self.on_change = on_change
         node.add_on_set_parameters_callback(self._validate)
         node.add_post_set_parameters_callback(self._apply)
 
     def _candidate(self, params: list[Parameter]) -> C:
         changes = {p.name: _from_ros(self._specs[p.name], p.value) for p in params if p.name in self._specs}
-        return dataclasses.replace(self.config, **changes)
+        return replace_config(self.config, changes)
 
     def _validate(self, params: list[Parameter]) -> SetParametersResult:
         try:

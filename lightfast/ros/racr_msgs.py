@@ -18,8 +18,6 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from lightfast.ros.convert import (
-    ImageConversionError,
-    PointCloudConversionError,
     _pose_to_matrix,
     image_to_numpy,
     make_header,
@@ -27,6 +25,7 @@ from lightfast.ros.convert import (
     pointcloud2_to_numpy,
     stamp_to_ns,
 )
+from lightfast.ros.errors import ImageConversionError, PointCloudConversionError
 from lightfast.ros.msgtypes import RCLPY, MessageTypes
 
 __all__ = [
@@ -51,7 +50,7 @@ class _PoseView:
 
 def transform_stamped_to_matrix(msg: Any) -> tuple[NDArray[np.float64], int, str, str]:
     """``(T_frame_child, stamp_ns, frame_id, child_frame_id)`` of a ``geometry_msgs/TransformStamped``; raises
-    :class:`~lightfast.ros.convert.PoseConversionError` for non-finite values or a non-unit quaternion."""
+    :class:`~lightfast.ros.errors.PoseConversionError` for non-finite values or a non-unit quaternion."""
     T = _pose_to_matrix(_PoseView(msg.transform), "TransformStamped.transform")
     return T, stamp_to_ns(msg.header.stamp), str(msg.header.frame_id), str(msg.child_frame_id)
 

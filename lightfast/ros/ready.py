@@ -19,16 +19,12 @@ from rclpy.publisher import Publisher
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import String
 
-from lightfast.errors import LightfastError
+from lightfast.ros.errors import NotReadyError
 from lightfast.ros.qos import LATCHED_QOS
 from lightfast.ros.spin import spin_until
 from lightfast.topics import READY_TOPIC
 
-__all__ = ["READY_TOPIC", "NotReadyError", "announce_ready", "process_alive", "wait_ready"]
-
-
-class NotReadyError(LightfastError):
-    """Nodes did not announce themselves in time, or a watched process ended first."""
+__all__ = ["READY_TOPIC", "announce_ready", "process_alive", "wait_ready"]
 
 
 def announce_ready(node: Node) -> Publisher:

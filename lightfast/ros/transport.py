@@ -33,7 +33,7 @@ import xml.etree.ElementTree as ET
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 
-from lightfast.errors import LightfastError
+from lightfast.ros.errors import TransportError
 
 PROFILE_PATH = Path(__file__).with_name("fastdds_local.xml")
 NETWORK_PROFILE_PATH = Path(__file__).with_name("fastdds_network.xml")
@@ -75,21 +75,21 @@ def use_local_transport(*, force: bool = False) -> None:
 # --- network profile ------------------------------------------------------------------------------------------
 
 def validate_peer(peer: str) -> str:
-    """``peer`` as ROS_STATIC_PEERS takes it (an IPv4 address or a host name), or a :class:`LightfastError`."""
+    """``peer`` as ROS_STATIC_PEERS takes it (an IPv4 address or a host name), or a :class:`TransportError`."""
     text = peer.strip()
     if not text:
-        raise LightfastError("empty host name")
+        raise TransportError("empty host name")
     if ";" in text or any(c.isspace() for c in text):
-        raise LightfastError(f"bad host {peer!r}: give one address or name per argument")
+        raise TransportError(f"bad host {peer!r}: give one address or name per argument")
     if re.fullmatch(r"[0-9.]+", text):
         return str(_ipv4(text, what="host"))
     if ":" in text:
         if _is_ipv6(text):
-            raise LightfastError(f"bad host {peer!r}: rmw_fastrtps (Jazzy) takes IPv4 static peers only")
-        raise LightfastError(f"bad host {peer!r}: no port (Fast DDS tries the well-known ports 7410+ of each peer)")
+            raise TransportError(f"bad host {peer!r}: rmw_fastrtps (Jazzy) takes IPv4 static peers only")
+        raise TransportError(f"bad host {peer!r}: no port (Fast DDS tries the well-known ports 7410+ of each peer)")
     name = text.rstrip(".")
     if len(name) > min(253, _PEER_MAX_LENGTH) or not all(_HOSTNAME.fullmatch(label) for label in name.split(".")):
-        raise LightfastError(f"bad host {peer!r}: not an IPv4 address or host name")
+        raise TransportError(f"bad host {peer!r}: not an IPv4 address or host name")
     return text
 
 
@@ -99,9 +99,9 @@ def validate_interface(interface: str) -> str:
     if re.fullmatch(r"[0-9.]+", text):
         return str(_ipv4(text, what="interface address"))
     if _is_ipv6(text):
-        raise LightfastError(f"bad interface {interface!r}: the UDPv4 transport takes IPv4 addresses")
+        raise TransportError(f"bad interface {interface!r}: the UDPv4 transport takes IPv4 addresses")
     if not _IFNAME.fullmatch(text):
-        raise LightfastError(f"bad interface {interface!r}: not an IPv4 address or interface name (e.g. eth0)")
+        raise TransportError(f"bad interface {interface!r}: not an IPv4 address or interface name (e.g. eth0)")
     return text
 
 
@@ -109,9 +109,9 @@ def _ipv4(text: str, *, what: str) -> ipaddress.IPv4Address:
     try:
         address = ipaddress.IPv4Address(text)
     except ValueError:
-        raise LightfastError(f"bad {what} {text!r}: not an IPv4 address") from None
+        raise TransportError(f"bad {what} {text!r}: not an IPv4 address") from None
     if address.is_unspecified or address.is_multicast or address == ipaddress.IPv4Address("255.255.255.255"):
-        raise LightfastError(f"bad {what} {text!r}: not a unicast address")
+        raise TransportError(f"bad {what} {text!r}: not a unicast address")
     return address
 
 
@@ -197,7 +197,7 @@ def write_network_profile(interfaces: Sequence[str] = (), *, udp_only: bool = Fa
 
 def network_transport_env(hosts: Sequence[str] = (), interfaces: Sequence[str] = (), *, udp_only: bool = False,
                           domain_id: int | None = None, cache_dir: Path | None = None) -> dict[str, str]:
-    """The environment variables of the network transport (validated; raises :class:`LightfastError`).
+    """The environment variables of the network transport (validated; raises :class:`TransportError`).
 
     ``hosts``: ROS_STATIC_PEERS (unicast discovery of these machines, besides SUBNET's multicast); ``interfaces``:
     a UDP whitelist (IPv4 addresses or interface names) and ``udp_only`` (no shared memory, e.g. for containers
@@ -207,7 +207,7 @@ def network_transport_env(hosts: Sequence[str] = (), interfaces: Sequence[str] =
     peers = _unique(validate_peer(h) for h in hosts)
     allowed = _unique(validate_interface(i) for i in interfaces)
     if len(";".join(peers)) > 4096:
-        raise LightfastError("too many static peers")
+        raise TransportError("too many static peers")
     if allowed or udp_only:
         profile = write_network_profile(allowed, udp_only=udp_only, cache_dir=cache_dir)
     else:

@@ -56,7 +56,6 @@ A sequence whose ``sequence.json`` holds the same parameter hash and whose files
 """
 from __future__ import annotations
 
-import argparse
 import csv
 import datetime as dt
 import hashlib
@@ -77,8 +76,9 @@ from numpy.typing import NDArray
 from scipy.interpolate import PchipInterpolator
 
 from lightfast.camera import PinholeCamera
+from lightfast.daylight.errors import OpeningsError
 from lightfast.daylight.mesh import save_ply
-from lightfast.daylight.openings import OpeningsError, load_openings, save_openings
+from lightfast.daylight.openings import load_openings, save_openings
 from lightfast.daylight.sun import Site, sun_position
 from lightfast.geometry import inverse, se3_exp, se3_log
 from lightfast.io import write_text_atomic
@@ -118,7 +118,6 @@ __all__ = [
     "cloud_transmittance",
     "generate_daylight_set",
     "hand_held_trajectory",
-    "main_sim_daylight",
     "sky_states",
 ]
 
@@ -678,38 +677,3 @@ def generate_daylight_set(
             kw = {"resolution_m": res} if site is None else {"resolution_m": res, "site": site}
             _scene_files(out, make_scene(scene_name, **kw), progress=progress)
     return results
-
-
-def _size(text: str) -> tuple[int, int]:
-    try:
-        w, h = text.lower().split("x")
-        return int(w), int(h)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT, e.g. 320x240, got {text!r}") from None
-
-
-def main_sim_daylight(argv: Sequence[str] | None = None) -> int:
-    """``lightfast sim daylight OUT [--sequences DS1.T1 ...] [--frames N] [--size WxH]``: render the simulated
-    daylight recordings (see the module docstring). Returns the exit code."""
-    parser = argparse.ArgumentParser(prog="lightfast sim daylight",
-                                     description="Render the simulated indoor daylight RGB-D sequences "
-                                                 "DS1.T1-T6 and DS2.T1-T6 (MCAP bags + truth).")
-    parser.add_argument("out", type=Path, help="output directory")
-    parser.add_argument("--sequences", nargs="+", metavar="NAME", choices=[s.name for s in SEQUENCES],
-                        help="sequences to render (default: all 12)")
-    parser.add_argument("--frames", type=int, default=600, help="frames per sequence (30 Hz; default 600)")
-    parser.add_argument("--size", type=_size, default=(320, 240), help="image size WxH (default 320x240)")
-    parser.add_argument("--resolution", type=float, default=None, help="scene mesh resolution in m (default 0.02)")
-    parser.add_argument("--supersample", type=int, default=2, help="subpixels per axis (default 2)")
-    parser.add_argument("--force", action="store_true", help="re-render complete sequences")
-    parser.add_argument("--no-progress", action="store_true", help="no progress bars")
-    args = parser.parse_args(argv)
-    if args.frames < 1:
-        parser.error("--frames must be >= 1")
-    w, h = args.size
-    dirs = generate_daylight_set(args.out, sequences=args.sequences, frames=args.frames, width=w, height=h,
-                                 progress=not args.no_progress, resolution_m=args.resolution,
-                                 supersample=args.supersample, force=args.force)
-    for d in dirs:
-        log.info("wrote %s", d)
-    return 0

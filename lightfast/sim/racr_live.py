@@ -27,12 +27,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from lightfast.config import param
 from lightfast.geometry import inverse, rotation_angle_deg
-from lightfast.sim.racr_platform import (
-    PlatformConfig,
-    PlatformError,
-    PlatformSimulator,
-    VseConfig,
-)
+from lightfast.sim.errors import PlatformError
+from lightfast.sim.racr_platform import PlatformConfig, PlatformSimulator, VseConfig
 from lightfast.sim.racr_scenes import RacrScene
 
 __all__ = [

@@ -70,13 +70,12 @@ from numpy.typing import ArrayLike, NDArray
 
 from lightfast.camera import PinholeCamera
 from lightfast.config import Config, param
-from lightfast.errors import LightfastError
 from lightfast.geometry import inverse, is_rotation, make_transform, project_to_so3, so3_exp, so3_log
+from lightfast.sim.errors import PlatformError
 
 __all__ = [
     "MotionRecord",
     "PlatformConfig",
-    "PlatformError",
     "PlatformSimulator",
     "Renderer",
     "VseConfig",
@@ -88,10 +87,6 @@ __all__ = [
 ]
 
 Array = NDArray[np.float64]
-
-
-class PlatformError(LightfastError, ValueError):
-    """The simulated platform refuses a command: not a finite rigid transform, or beyond its motion limits."""
 
 
 # ----------------------------------------------------------------------------------------------------------------

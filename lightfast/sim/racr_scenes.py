@@ -94,7 +94,6 @@ A scene directory whose manifest matches the parameters and whose files match th
 """
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import datetime as dt
 import hashlib
@@ -116,13 +115,14 @@ import yaml
 from numpy.typing import ArrayLike, NDArray
 
 from lightfast.camera import PinholeCamera
-from lightfast.daylight.mesh import MeshError, ReflectanceMesh, load_ply, save_ply
+from lightfast.daylight.errors import MeshError
+from lightfast.daylight.mesh import ReflectanceMesh, load_ply, save_ply
 from lightfast.daylight.sun import Site, sun_position
-from lightfast.errors import LightfastError
 from lightfast.geometry import inverse, make_transform, so3_exp
 from lightfast.io import atomic_directory, load_npz, read_versioned_yaml, write_bytes_atomic, write_text_atomic
 from lightfast.progress import track
 from lightfast.raycast import RayCaster
+from lightfast.sim.errors import RacrSimError
 from lightfast.sim.racr_platform import PlatformConfig, PlatformSimulator, VseConfig, VseStandIn
 from lightfast.sim.sky_model import (
     CLEAR_SKY_RGB,
@@ -144,7 +144,6 @@ __all__ = [
     "RacrRenderer",
     "RacrScene",
     "RacrSceneSpec",
-    "RacrSimError",
     "ReferenceObservation",
     "RenderResult",
     "SceneTruth",
@@ -157,7 +156,6 @@ __all__ = [
     "load_reference",
     "load_scene",
     "look_at",
-    "main_sim_racr",
     "make_reference",
     "resolve_lighting",
     "scene_complete",
@@ -183,11 +181,6 @@ AFD_SUCCESS_PX = 3.0
 AMBIENT_DIRECTIONS = 64
 DEFAULT_RESOLUTION_M = 0.0025
 _EPS_M = 2e-4
-
-
-class RacrSimError(LightfastError, ValueError):
-    """A scene or reference file that cannot be used (missing, half-written, wrong format or version), or bad
-    simulator input."""
 
 
 # ================================================================================================================
@@ -2086,41 +2079,3 @@ def generate_racr_set(out_dir: str | os.PathLike[str], *, scenes: Sequence[str] 
                  time.perf_counter() - t0)
         dirs.append(d)
     return dirs
-
-
-def _size(text: str) -> tuple[int, int]:
-    try:
-        w, h = text.lower().split("x")
-        return int(w), int(h)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT, e.g. 640x480, got {text!r}") from None
-
-
-def main_sim_racr(argv: Sequence[str] | None = None) -> int:
-    """``lightfast sim racr OUT [--scenes N] [--only S01 …] [--size WxH] [--resolution M] [--seed K] [--force]``:
-    write the simulated rACR scenes (see the module docstring). Returns the exit code."""
-    parser = argparse.ArgumentParser(prog="lightfast sim racr",
-                                     description="Write the 20 simulated rACR scenes (paper §5.1): mesh, lighting "
-                                                 "variants, reference observation and truth per scene.")
-    parser.add_argument("out", type=Path, help="output directory")
-    parser.add_argument("--scenes", type=int, default=None, metavar="N", help="only the first N scenes (S01..)")
-    parser.add_argument("--only", nargs="+", metavar="NAME", default=None, help="only these scenes, e.g. S03 S14")
-    parser.add_argument("--size", type=_size, default=(640, 480), help="image size WxH (default 640x480)")
-    parser.add_argument("--resolution", type=float, default=DEFAULT_RESOLUTION_M,
-                        help=f"vertex step of detailed surfaces in m (default {DEFAULT_RESOLUTION_M})")
-    parser.add_argument("--seed", type=int, default=0, help="scene set seed (default 0)")
-    parser.add_argument("--force", action="store_true", help="rebuild complete scenes")
-    parser.add_argument("--no-previews", action="store_true", help="skip the preview images")
-    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
-    args = parser.parse_args(argv)
-    if args.scenes is not None and not 1 <= args.scenes <= 20:
-        parser.error("--scenes must be in 1..20")
-    if args.resolution <= 0:
-        parser.error("--resolution must be > 0")
-    w, h = args.size
-    dirs = generate_racr_set(args.out, scenes=args.only, count=args.scenes, width=w, height=h,
-                             resolution_m=args.resolution, seed=args.seed, force=args.force,
-                             progress=not args.no_progress, previews=not args.no_previews)
-    for d in dirs:
-        log.info("wrote %s", d)
-    return 0

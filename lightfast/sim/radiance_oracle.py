@@ -53,8 +53,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from lightfast.daylight.mesh import ReflectanceMesh
-from lightfast.errors import LightfastError
 from lightfast.geometry import unit_vector
+from lightfast.sim.errors import RadianceError
 
 Component = Literal["sun", "sky", "ground"]
 COMPONENTS: tuple[str, ...] = ("sun", "sky", "ground")
@@ -107,10 +107,6 @@ point is ~5 %, so average ``repeats`` independent traces (noise ∝ 1/√repeats
 component: ~2 % noise on shadowed points at ``-ab 8``. Points that see the sky or sun directly are much less noisy
 (< 1 %).
 """
-
-
-class RadianceError(LightfastError, RuntimeError):
-    """Radiance is missing, failed, or returned something unexpected."""
 
 
 def radiance_bin_dir() -> Path | None:

@@ -23,8 +23,9 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from lightfast.daylight.mesh import MeshError, ReflectanceMesh, merge_meshes
+from lightfast.daylight.mesh import ReflectanceMesh, merge_meshes
 from lightfast.raycast import RayCaster
+from lightfast.sim.errors import ValidationRoomError
 
 RGB = tuple[float, float, float]
 Window = tuple[float, float, float, str]  # (width, height, sill height, wall)
@@ -49,10 +50,6 @@ _WALLS: dict[str, tuple[tuple[float, float], tuple[float, float, float], tuple[f
 }
 _ALIASES = {"-y": "south", "+y": "north", "-x": "west", "+x": "east", "y-": "south", "y+": "north", "x-": "west",
             "x+": "east"}
-
-
-class ValidationRoomError(MeshError):
-    """Room parameters that do not describe a valid room (window larger than its wall, negative sizes...)."""
 
 
 class _WallFrame:

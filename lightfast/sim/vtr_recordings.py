@@ -57,7 +57,6 @@ whose ``run.json`` holds the same parameter hash is skipped (``force`` re-render
 """
 from __future__ import annotations
 
-import argparse
 import csv
 import datetime as dt
 import hashlib
@@ -68,7 +67,7 @@ import math
 import os
 import time
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -114,7 +113,6 @@ __all__ = [
     "drive_route",
     "generate_vtr_set",
     "load_schedule",
-    "main_sim_vtr",
 ]
 
 log = logging.getLogger(__name__)
@@ -575,59 +573,3 @@ def generate_vtr_set(
     write_text_atomic(out / "runs.json", json.dumps({"format_version": FORMAT_VERSION, "runs": index},
                                                     indent=1) + "\n")
     return results
-
-
-# ================================================================================================================
-# CLI
-
-
-def _size(text: str) -> tuple[int, int]:
-    try:
-        w, h = text.lower().split("x")
-        return int(w), int(h)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT, e.g. 640x480, got {text!r}") from None
-
-
-def main_sim_vtr(argv: Sequence[str] | None = None) -> int:
-    """``lightfast sim vtr OUT [--runs NAME ...] [--schedule FILE] [--length M] [--size WxH] [--rate HZ]
-    [--speed MPS] [--frames N] [--seed N] [--force] [--no-progress]``: render the simulated stereo VT&R
-    recordings (see the module docstring). Returns the exit code."""
-    parser = argparse.ArgumentParser(
-        prog="lightfast sim vtr",
-        description="Render spectral outdoor stereo recordings for colour-constant visual teach & repeat: a "
-                    "teach run at 10:50 in sun and repeats from sunrise to sunset on a sunny and a cloudy day "
-                    "(MCAP bags + truth).")
-    parser.add_argument("out", type=Path, help="output directory")
-    parser.add_argument("--runs", nargs="+", metavar="NAME", choices=[r.name for r in TABLE_I],
-                        help=f"runs of the paper's Table I (default: {' '.join(DEFAULT_RUNS)})")
-    parser.add_argument("--schedule", type=Path, metavar="FILE",
-                        help="YAML list of runs {name, date, start, weather[, kind]} instead of --runs")
-    parser.add_argument("--length", type=float, default=300.0, help="route length in m (default 300)")
-    parser.add_argument("--size", type=_size, default=(640, 480), help="image size WxH (default 640x480)")
-    parser.add_argument("--rate", type=float, default=2.0, help="stereo frames per second (default 2)")
-    parser.add_argument("--speed", type=float, default=0.8, help="driving speed in m/s (default 0.8)")
-    parser.add_argument("--frames", type=int, default=None, help="at most this many frames per run")
-    parser.add_argument("--seed", type=int, default=0, help="seed of driving and noise (default 0)")
-    parser.add_argument("--scene-seed", type=int, default=RouteConfig.seed, help="seed of the scene")
-    parser.add_argument("--force", action="store_true", help="re-render complete runs")
-    parser.add_argument("--no-progress", action="store_true", help="no progress bars")
-    args = parser.parse_args(argv)
-    if args.schedule and args.runs:
-        parser.error("give --runs or --schedule, not both")
-    if args.frames is not None and args.frames < 1:
-        parser.error("--frames must be >= 1")
-    if not args.length > 5.0:
-        parser.error("--length must be > 5 m")
-    w, h = args.size
-    if w < 16 or h < 16:
-        parser.error("--size must be at least 16x16")
-    runs: Sequence[str | RunSpec] | None = load_schedule(args.schedule) if args.schedule else args.runs
-    dirs = generate_vtr_set(
-        args.out, runs=runs, route=replace(RouteConfig(), length_m=args.length, seed=args.scene_seed),
-        rig=replace(StereoRig(), width=w, height=h),
-        drive=replace(DriveConfig(), rate_hz=args.rate, speed_mps=args.speed, max_frames=args.frames),
-        seed=args.seed, progress=not args.no_progress, force=args.force)
-    for d in dirs:
-        log.info("wrote %s", d)
-    return 0

@@ -1,13 +1,13 @@
 """Camera tracking (paper §III-D): direct RGB-D alignment (Eq. 7) and trajectory metrics. ROS-free."""
 from __future__ import annotations
 
+from lightfast.tracking.errors import TrackingError
 from lightfast.tracking.metrics import align_umeyama, ate_rmse
 from lightfast.tracking.rgbd_odometry import (
     AlignResult,
     RGBDFrame,
     SequenceTrack,
     TrackingConfig,
-    TrackingError,
     align,
     align_frames,
     prepare_frame,

@@ -9,13 +9,9 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from lightfast.errors import LightfastError
+from lightfast.tracking.errors import MetricsError
 
-__all__ = ["MetricsError", "align_umeyama", "ate_rmse"]
-
-
-class MetricsError(LightfastError, ValueError):
-    """Trajectories that cannot be compared (shape mismatch, too few poses, non-finite values)."""
+__all__ = ["align_umeyama", "ate_rmse"]
 
 
 def _positions(T: ArrayLike, name: str) -> NDArray[np.float64]:

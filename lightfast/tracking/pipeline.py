@@ -37,14 +37,8 @@ from lightfast.camera import PinholeCamera
 from lightfast.config import ConfigError, param
 from lightfast.geometry import make_transform, quat_to_matrix, rotation_angle_deg
 from lightfast.node_options import SensorInputOptions, StampOptions
-from lightfast.tracking.rgbd_odometry import (
-    AlignResult,
-    RGBDFrame,
-    TrackingConfig,
-    TrackingError,
-    align_frames,
-    prepare_frame,
-)
+from lightfast.tracking.errors import TrackingError, TrackingInputError
+from lightfast.tracking.rgbd_odometry import AlignResult, RGBDFrame, TrackingConfig, align_frames, prepare_frame
 
 __all__ = ["CoarseEstimate", "F2FJob", "F2MJob", "RGBDTracker", "TrackResult", "TrackerConfig"]
 
@@ -261,7 +255,7 @@ class RGBDTracker:
         evaluation's reset to ground truth after a tracking loss), else of the next frame."""
         T = np.asarray(T_map_cam, dtype=np.float64)
         if T.shape != (4, 4) or not np.all(np.isfinite(T)):
-            raise TrackingError(f"reset pose must be a finite 4x4 matrix, got shape {T.shape}")
+            raise TrackingInputError(f"reset pose must be a finite 4x4 matrix, got shape {T.shape}")
         self._pending.clear()
         self._velocity = np.eye(4)
         if stamp_ns is not None and self._last is not None and self._last[0] == int(stamp_ns):
@@ -281,10 +275,10 @@ class RGBDTracker:
         the constant-velocity prior as they are now): run it outside the lock that guards this tracker, so that f2m
         jobs can start and finish meanwhile, then :meth:`finish_coarse`. One f2f job at a time."""
         if not self.initialized:
-            raise TrackingError("tracker has no start pose: call reset(T_map_cam) first")
+            raise TrackingInputError("tracker has no start pose: call reset(T_map_cam) first")
         stamp = int(stamp_ns)
         if self._last is not None and stamp <= self._last[0]:
-            raise TrackingError(f"frame stamp {stamp} is not after the previous frame's {self._last[0]}")
+            raise TrackingInputError(f"frame stamp {stamp} is not after the previous frame's {self._last[0]}")
         cfg = self.config
         prev = None if self._last is None else self._last[:2]
         init = self._velocity if cfg.motion_prior == "constant-velocity" else None
@@ -300,13 +294,13 @@ class RGBDTracker:
         stamp, res = job.stamp_ns, job.result
         if job.previous is None:
             if self._last is not None or self._T_start is None:
-                raise TrackingError(f"frame {stamp}: the tracker was reset or moved on while it was tracked")
+                raise TrackingInputError(f"frame {stamp}: the tracker was reset or moved on while it was tracked")
             T, prev_stamp, T_rel = self._T_start.copy(), None, np.eye(4)
             self._T_start = None
         else:
             prev_stamp = job.previous[0]
             if self._last is None or self._last[0] != prev_stamp or self._last[1] is not job.previous[1]:
-                raise TrackingError(f"frame {stamp}: the tracker was reset or moved on while it was tracked")
+                raise TrackingInputError(f"frame {stamp}: the tracker was reset or moved on while it was tracked")
             assert res is not None
             T_rel = res.T_target_source
             self._velocity = T_rel if res.converged else np.eye(4)
@@ -349,12 +343,12 @@ class RGBDTracker:
         thread (its kernels release the GIL) while this tracker goes on with f2f, then :meth:`finish_refine`."""
         stamp = int(stamp_ns)
         if stamp not in self._pending:
-            raise TrackingError(f"no pending frame with stamp {stamp} (late or unknown reference)")
+            raise TrackingInputError(f"no pending frame with stamp {stamp} (late or unknown reference)")
         half = self.camera.scaled(0.5)
         ref_shape = np.shape(ref_depth_m)[:2]
         if ref_shape not in (self.camera.shape, half.shape):
-            raise TrackingError(f"reference {stamp}: depth image {ref_shape} is neither the camera's size "
-                                f"{self.camera.shape} nor half of it {half.shape}")
+            raise TrackingInputError(f"reference {stamp}: depth image {ref_shape} is neither the camera's size "
+                                     f"{self.camera.shape} nor half of it {half.shape}")
         return F2MJob(stamp, self._pending[stamp].frame, ref_rgb, ref_depth_m,
                       self.camera if ref_shape == self.camera.shape else half, self.config)
 
@@ -365,7 +359,7 @@ class RGBDTracker:
         stamp = job.stamp_ns
         p = self._pending.get(stamp)
         if p is None or p.frame is not job.source:
-            raise TrackingError(f"frame {stamp} was finished while its reference was aligned")
+            raise TrackingInputError(f"frame {stamp} was finished while its reference was aligned")
         if job.error is not None:
             raise job.error
         res, seconds = job.result, {"f2m": job.seconds}
@@ -386,5 +380,5 @@ class RGBDTracker:
         """Finish a pending frame without f2m: its (re-chained) f2f pose is final."""
         stamp = int(stamp_ns)
         if stamp not in self._pending:
-            raise TrackingError(f"no pending frame with stamp {stamp}")
+            raise TrackingInputError(f"no pending frame with stamp {stamp}")
         return self._finish(stamp, self._pending[stamp].T_best, "f2f", reason, None, {})

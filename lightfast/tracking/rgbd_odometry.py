@@ -75,8 +75,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from lightfast.camera import PinholeCamera
 from lightfast.config import Config, ConfigError, param
-from lightfast.errors import LightfastError
 from lightfast.geometry import se3_exp, se3_log
+from lightfast.tracking.errors import TrackingInputError
 
 __all__ = [
     "GEOMETRIC_TERMS",
@@ -85,7 +85,6 @@ __all__ = [
     "RGBDFrame",
     "SequenceTrack",
     "TrackingConfig",
-    "TrackingError",
     "align",
     "align_frames",
     "prepare_frame",
@@ -99,10 +98,6 @@ TRACKING_MODES = ("proposed", "refl-f2m", "depth-only", "no-color-f2m")
 GEOMETRIC_TERMS = ("point-to-plane", "depth-difference")
 _GREY = np.array([0.299, 0.587, 0.114], dtype=np.float32)
 _MIN_CORRESPONDENCES = 50
-
-
-class TrackingError(LightfastError, ValueError):
-    """Inputs that cannot be aligned: wrong shapes or sizes, no valid depth, nothing to optimise."""
 
 
 @dataclass(frozen=True)
@@ -285,22 +280,22 @@ def _to_grey(rgb: NDArray[np.generic], name: str) -> NDArray[np.float32]:
     elif a.ndim == 2:
         grey = a.astype(np.float32)
     else:
-        raise TrackingError(f"{name} must be (H, W, 3) RGB or (H, W) grey, got shape {a.shape}")
+        raise TrackingInputError(f"{name} must be (H, W, 3) RGB or (H, W) grey, got shape {a.shape}")
     if a.dtype == np.uint8:
         grey *= np.float32(1.0 / 255.0)
     elif not np.issubdtype(a.dtype, np.floating):
-        raise TrackingError(f"{name} must be uint8 or float in [0, 1], got dtype {a.dtype}")
+        raise TrackingInputError(f"{name} must be uint8 or float in [0, 1], got dtype {a.dtype}")
     if not np.all(np.isfinite(grey)):
-        raise TrackingError(f"{name} holds non-finite values")
+        raise TrackingInputError(f"{name} holds non-finite values")
     return grey
 
 
 def _check_depth(depth_m: ArrayLike, name: str, cfg: TrackingConfig) -> NDArray[np.float32]:
     d = np.asarray(depth_m)
     if d.ndim != 2:
-        raise TrackingError(f"{name} must be a (H, W) depth image in metres, got shape {d.shape}")
+        raise TrackingInputError(f"{name} must be a (H, W) depth image in metres, got shape {d.shape}")
     if not np.issubdtype(d.dtype, np.floating):
-        raise TrackingError(f"{name} must be float metres, got dtype {d.dtype} (convert millimetres first)")
+        raise TrackingInputError(f"{name} must be float metres, got dtype {d.dtype} (convert millimetres first)")
     d = d.astype(np.float32)
     valid = np.isfinite(d) & (d >= cfg.min_depth_m) & (d <= cfg.max_depth_m)
     return np.where(valid, d, np.float32(0.0))
@@ -403,12 +398,12 @@ def _prepare(rgb: ArrayLike, depth_m: ArrayLike, camera: PinholeCamera, cfg: Tra
     grey = _to_grey(np.asarray(rgb), f"{role}_rgb")
     depth = _check_depth(depth_m, f"{role}_depth_m", cfg)
     if grey.shape != camera.shape or depth.shape != camera.shape:
-        raise TrackingError(
+        raise TrackingInputError(
             f"{role} images must match the camera size {camera.shape} (H, W): colour {grey.shape}, "
             f"depth {depth.shape}"
         )
     if not np.any(depth > 0):
-        raise TrackingError(
+        raise TrackingInputError(
             f"{role}_depth_m has no valid depth in [{cfg.min_depth_m}, {cfg.max_depth_m}] m (all zero / invalid?)"
         )
     cam = camera
@@ -421,7 +416,7 @@ def _prepare(rgb: ArrayLike, depth_m: ArrayLike, camera: PinholeCamera, cfg: Tra
             grey, depth = _downsample_grey(grey), _downsample_depth(depth, cfg.depth_discontinuity_m)
             cam = cam.scaled(0.5)
         if min(grey.shape) < 8:
-            raise TrackingError(
+            raise TrackingInputError(
                 f"image too small for {cfg.pyramid_levels} pyramid levels: level {level} is {grey.shape}"
             )
         levels.append(_Level(cam, grey, depth, cfg.finest_point_step if level == 0 else 1, cfg.depth_discontinuity_m))
@@ -677,14 +672,14 @@ def _resolve_terms(cfg: TrackingConfig, use_color: bool | None, use_depth: bool 
     color = cfg.mode != "depth-only" if use_color is None else bool(use_color)
     depth = True if use_depth is None else bool(use_depth)
     if not (color or depth):
-        raise TrackingError("align needs at least one of use_color / use_depth")
+        raise TrackingInputError("align needs at least one of use_color / use_depth")
     return color, depth
 
 
 def _check_init(init: ArrayLike | None) -> NDArray[np.float64]:
     T = np.eye(4) if init is None else np.asarray(init, dtype=np.float64)
     if T.shape != (4, 4) or not np.all(np.isfinite(T)):
-        raise TrackingError(f"init_T_target_source must be a finite 4x4 matrix, got shape {T.shape}")
+        raise TrackingInputError(f"init_T_target_source must be a finite 4x4 matrix, got shape {T.shape}")
     return T
 
 
@@ -742,13 +737,13 @@ def align_frames(
     init = _check_init(init_T_target_source)
     for role, frame in (("source", source), ("target", target)):
         if (frame.pyramid_levels, frame.resolution_scale) != (cfg.pyramid_levels, cfg.resolution_scale):
-            raise TrackingError(
+            raise TrackingInputError(
                 f"{role} frame was prepared with pyramid_levels={frame.pyramid_levels}, resolution_scale="
                 f"{frame.resolution_scale}; this alignment uses {cfg.pyramid_levels}, {cfg.resolution_scale}"
             )
     if target.camera not in (source.camera, source.camera.scaled(0.5)):
-        raise TrackingError(f"the target camera must be the source camera or the source camera at half resolution: "
-                            f"source {source.camera}, target {target.camera}")
+        raise TrackingInputError(f"the target camera must be the source camera or the source camera at half "
+                                 f"resolution: source {source.camera}, target {target.camera}")
     if target.camera == source.camera:
         return _align_pyramids(source.levels, target.levels, init, cfg, color, depth)
     # half resolution: same-size levels together; the full-resolution source level has no partner
@@ -790,7 +785,7 @@ def track_sequence(
         poses.append(T_world.copy())
         prev = cur
     if not poses:
-        raise TrackingError("track_sequence got no frames")
+        raise TrackingInputError("track_sequence got no frames")
     return SequenceTrack(np.stack(poses), tuple(results), np.asarray(seconds))
 
 

@@ -30,23 +30,18 @@ from lightfast.vtr.color_constant import (
     temperature_beta,
     to_uint8,
 )
-from lightfast.vtr.errors import VtrError, VtrInputError
-from lightfast.vtr.localizer_config import PHASES, VtrLocalizerConfig
-from lightfast.vtr.map_store import (
-    MAP_FORMAT,
-    MAP_VERSION,
-    Edge,
-    Keyframe,
-    Landmarks,
+from lightfast.vtr.errors import (
     MapCorruptError,
     MapError,
     MapExistsError,
     MapNotFoundError,
-    MapStore,
     MapVersionError,
-    MapWriter,
-    TeachMap,
+    VtrError,
+    VtrInputError,
+    VtrStateError,
 )
+from lightfast.vtr.localizer_config import PHASES, VtrLocalizerConfig
+from lightfast.vtr.map_store import MAP_FORMAT, MAP_VERSION, Edge, Keyframe, Landmarks, MapStore, MapWriter, TeachMap
 from lightfast.vtr.repeat import MODES, Localization, MapLocalizer, RepeatConfig, RepeatPipeline, RepeatResult
 from lightfast.vtr.stereo import (
     FEATURE_CHOICE,
@@ -123,6 +118,7 @@ __all__ = [
     "VtrError",
     "VtrInputError",
     "VtrLocalizerConfig",
+    "VtrStateError",
     "check_projection",
     "check_stereo_pair",
     "color_constant",

@@ -52,7 +52,14 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from lightfast.io import atomic_directory, load_npz, read_json_mapping, write_bytes_atomic, write_text_atomic
-from lightfast.vtr.errors import VtrError, VtrInputError
+from lightfast.vtr.errors import (
+    MapCorruptError,
+    MapExistsError,
+    MapNotFoundError,
+    MapVersionError,
+    VtrInputError,
+    VtrStateError,
+)
 from lightfast.vtr.stereo import FEATURE_TYPES, StereoFeatures, check_stereo_pair
 
 __all__ = [
@@ -61,12 +68,7 @@ __all__ = [
     "Edge",
     "Keyframe",
     "Landmarks",
-    "MapCorruptError",
-    "MapError",
-    "MapExistsError",
-    "MapNotFoundError",
     "MapStore",
-    "MapVersionError",
     "MapWriter",
     "TeachMap",
 ]
@@ -80,26 +82,6 @@ STAGING: Final = "staging.json"
 KEYFRAME_DIR: Final = "keyframes"
 _DESCRIPTOR_DTYPE: Final = {"orb": np.dtype(np.uint8), "sift": np.dtype(np.float32)}
 _RIGID_ATOL: Final = 1e-6
-
-
-class MapError(VtrError):
-    """A teach map cannot be used (root of the map errors)."""
-
-
-class MapNotFoundError(MapError, FileNotFoundError):
-    """No complete map at the path: the directory or its manifest is missing (e.g. a teach that never finished)."""
-
-
-class MapVersionError(MapError):
-    """The directory holds another format or a map version this code does not read."""
-
-
-class MapCorruptError(MapError):
-    """The map is inconsistent: unreadable manifest, missing/truncated/altered keyframe file, wrong shapes..."""
-
-
-class MapExistsError(MapError, FileExistsError):
-    """A map exists at the path and overwriting was not allowed."""
 
 
 # --------------------------------------------------------------------------------------------------------------
@@ -340,7 +322,7 @@ class MapWriter:
         """Write the next keyframe (atomically) and return its index. ``T_parent_child`` links it to the previous
         keyframe (required except for the first)."""
         if not self._open:
-            raise VtrError("the map writer is closed")
+            raise VtrStateError("the map writer is closed")
         index = len(self._entries)
         if index == 0:
             T = np.eye(4)
@@ -384,10 +366,10 @@ class MapWriter:
     def commit(self) -> Path:
         """Write the manifest (last) and move the map into place, replacing a previous one (if allowed)."""
         if not self._open:
-            raise VtrError("the map writer is closed")
+            raise VtrStateError("the map writer is closed")
         if not self._entries:
             self.abort()
-            raise VtrError(f"no keyframes: nothing to save at {self.path}")
+            raise VtrInputError(f"no keyframes: nothing to save at {self.path}")
         dist = 0.0
         for i, e in enumerate(self._entries):
             if i:
@@ -410,7 +392,7 @@ class MapWriter:
         if not self._open:
             return
         self._open = False
-        self._stack.__exit__(VtrError, VtrError("map writing aborted"), None)
+        self._stack.__exit__(VtrStateError, VtrStateError("map writing aborted"), None)
 
     def __enter__(self) -> MapWriter:
         return self

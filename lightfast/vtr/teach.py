@@ -38,8 +38,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from lightfast.config import Config, ConfigError, param
 from lightfast.vtr.color_constant import SOURCES, ColorConstantConfig, image_sources
-from lightfast.vtr.errors import VtrError, VtrInputError
-from lightfast.vtr.map_store import Landmarks, MapExistsError, MapStore, MapWriter, TeachMap
+from lightfast.vtr.errors import MapExistsError, VtrInputError, VtrStateError
+from lightfast.vtr.map_store import Landmarks, MapStore, MapWriter, TeachMap
 from lightfast.vtr.stereo import FeatureExtractor, StereoConfig, StereoFeatures, StereoFrontEnd, check_stereo_pair
 from lightfast.vtr.visual_odometry import StereoCamera, VisualOdometry, VisualOdometryConfig
 
@@ -258,7 +258,7 @@ class TeachPipeline:
                       P_right: ArrayLike, image_size: tuple[int, int]) -> TeachResult:
         """:meth:`step` with the front end's output computed elsewhere (all configured sources)."""
         if self._closed:
-            raise VtrError("the teach has finished or was aborted")
+            raise VtrStateError("the teach has finished or was aborted")
         missing = [s for s in self.config.sources if s not in features]
         if missing:
             raise VtrInputError(f"features of {missing} are missing")
@@ -310,10 +310,10 @@ class TeachPipeline:
         """Close the teach: add the last frame as a keyframe if it moved ≥ 1/5 of the keyframe spacing, write the
         manifest, move the map into place and return it (loaded back from disk, i.e. validated)."""
         if self._closed:
-            raise VtrError("the teach has finished or was aborted")
+            raise VtrStateError("the teach has finished or was aborted")
         try:
             if self._writer is None:
-                raise VtrError(f"no frames were taught: nothing to save at {self.path}")
+                raise VtrInputError(f"no frames were taught: nothing to save at {self.path}")
             if self._last is not None:
                 moved = float(np.linalg.norm(self._T_kf_cam[:3, 3])) >= 0.2 * self.config.keyframe_distance_m
                 turned = rotation_deg(self._T_kf_cam) >= 0.2 * self.config.keyframe_angle_deg

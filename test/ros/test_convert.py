@@ -20,12 +20,7 @@ from lightfast.camera import PinholeCamera
 from lightfast.errors import LightfastError
 from lightfast.ros.convert import (
     IMAGE_ENCODINGS,
-    CameraInfoError,
     CameraInfoReader,
-    ConversionError,
-    ImageConversionError,
-    PointCloudConversionError,
-    PoseConversionError,
     camera_from_camera_info,
     camera_info_from_camera,
     image_fields,
@@ -44,6 +39,13 @@ from lightfast.ros.convert import (
     pose_to_matrix,
     stamp_to_ns,
     xyz_to_pointcloud2,
+)
+from lightfast.ros.errors import (
+    CameraInfoError,
+    ConversionError,
+    ImageConversionError,
+    PointCloudConversionError,
+    PoseConversionError,
 )
 from lightfast.ros.msgtypes import RCLPY, MessageTypes, rosbags_types
 

@@ -9,7 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from lightfast.ros.domain import DomainExhaustedError, reserve_domain_id
+from lightfast.ros.domain import reserve_domain_id
+from lightfast.ros.errors import DomainExhaustedError
 from test.helpers import bounded_process, run_bounded
 
 PROBE = Path(__file__).with_name("isolation_probe.py")

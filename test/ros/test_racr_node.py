@@ -41,6 +41,7 @@ from lightfast.ros.convert import (
 from lightfast.ros.diagnostics import Level, diagnostic_level, diagnostic_values
 from lightfast.ros.qos import OUTPUT_QOS
 from lightfast.ros.racr_msgs import matrix_to_transform_stamped, transform_stamped_to_matrix
+from lightfast.ros.racr_tools import pose7_to_matrix
 from lightfast.ros.spin import spin_until
 from lightfast.sim.racr_live import evaluate_final_pose
 from lightfast.sim.racr_scenes import generate_racr_set, load_reference, load_scene, write_reference
@@ -62,7 +63,6 @@ from lightfast.topics import (
     VSE_POSE_TOPIC,
 )
 from racr_node.node import NODE_NAME, RacrNode
-from racr_node.tools import _pose7
 from racr_platform_sim_node.node import RacrPlatformSimNode
 from racr_vse_node.node import RacrVseNode
 
@@ -179,7 +179,7 @@ def test_racr_platform_and_vse_nodes_relocalize_the_camera(scene_dir: Path, star
     # where the camera is, by the truth (evaluation only)
     scene = load_scene(scene_dir)
     r = evaluate_final_pose(scene, platform.platform.true_camera_pose, scale_m_per_vse=float(values["scale_m_per_vse"]),
-                            T_cam_hand=_pose7(values["T_cam_hand"]))
+                            T_cam_hand=pose7_to_matrix(values["T_cam_hand"]))
     assert r.success and r.afd_px < 3.0, r
     assert r.translation_error_m < 0.02 and r.rotation_error_deg < 0.5, r
     assert abs(r.scale_error_rel) < 0.05 and r.hand_eye_rotation_error_deg < 2.0, r
@@ -257,7 +257,7 @@ def test_initialization_flow_recovers_hand_eye_and_scale_and_garbage_clouds_issu
     level, message, values = probe.wait_status(lambda lv, m, v: v.get("stage") == "aligning")
     assert len(probe.motions) == 4 and values["init_motions_done"] == "4"
     assert float(values["scale_m_per_vse"]) == pytest.approx(S_VSE, rel=1e-6)
-    X = _pose7(values["T_cam_hand"])
+    X = pose7_to_matrix(values["T_cam_hand"])
     assert X is not None and np.allclose(X, X_TRUE, atol=1e-5)
     assert rotation_angle_deg(rig.T_base_hand[:3, :3], (rig.T_cam0 @ X_TRUE)[:3, :3]) < 1e-6  # back at the start
     assert level == Level.WARN and "waiting for a usable VSE cloud" in message

@@ -10,7 +10,8 @@ import time
 import pytest
 from rclpy.parameter import Parameter
 
-from lightfast.ros.ready import NotReadyError, announce_ready, process_alive, wait_ready
+from lightfast.ros.errors import NotReadyError
+from lightfast.ros.ready import announce_ready, process_alive, wait_ready
 from sun_update_node.node import SunUpdateNode
 
 

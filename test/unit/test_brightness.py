@@ -7,7 +7,6 @@ import pytest
 from lightfast.camera import PinholeCamera
 from lightfast.daylight.brightness import (
     COMPONENTS,
-    BrightnessError,
     BrightnessEstimator,
     RadiosityImages,
     ScaleFit,
@@ -16,6 +15,7 @@ from lightfast.daylight.brightness import (
     relit_image,
 )
 from lightfast.daylight.crf import CameraResponse
+from lightfast.daylight.errors import BrightnessError
 from lightfast.daylight.lighting_map import LightingMapConfig, prepare_lighting_map
 from lightfast.daylight.sun import FREIBURG
 from lightfast.daylight.sun_update import sun_radiosity

@@ -3,7 +3,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from lightfast.camera import CameraModelError, PinholeCamera
+from lightfast.camera import PinholeCamera
+from lightfast.errors import CameraModelError
 
 CAM = PinholeCamera(640, 480, 585.0, 585.0, 320.0, 240.0)
 

@@ -1,9 +1,21 @@
 from dataclasses import dataclass
+from pathlib import Path
 
 import pytest
 import yaml
 
-from lightfast.config import Config, ConfigError, config_from_mapping, config_yaml, field_specs, load_config_yaml, param
+from lightfast.config import (
+    Config,
+    ConfigError,
+    config_from_mapping,
+    config_yaml,
+    field_specs,
+    leaf_specs,
+    leaf_values,
+    load_config_yaml,
+    param,
+    replace_config,
+)
 from lightfast.io import write_text_atomic
 
 
@@ -94,3 +106,48 @@ def test_committed_node_parameter_files_are_current() -> None:
     config_dir = Path(__file__).resolve().parents[2] / "config"
     assert write_node_configs(config_dir, check=True) == []
     assert sorted(p.stem for p in config_dir.glob("*.yaml")) == sorted(NODE_CONFIGS)
+
+
+# --- sections: configurations inside configurations ---------------------------------------------------------------
+
+@dataclass(frozen=True)
+class InnerConfig(Config):
+    size: int = param(10, description="Size.", min=1)
+    names: tuple[str, ...] = param(("a",), description="Names.")
+
+
+_INNER = InnerConfig(size=20)
+
+
+@dataclass(frozen=True)
+class OuterConfig(Config):
+    gain: float = param(0.5, description="Gain.")
+    inner: InnerConfig = param(_INNER, description="The inner component.")
+
+
+def test_a_section_defaults_to_the_given_instance_and_takes_dotted_or_nested_keys() -> None:
+    assert OuterConfig().inner == InnerConfig(size=20)  # the node's default, not InnerConfig()'s
+    dotted = config_from_mapping(OuterConfig, {"inner.names": ["x", "y"]})
+    assert dotted.inner == InnerConfig(size=20, names=("x", "y"))  # laid over the section's default
+    nested = config_from_mapping(OuterConfig, {"gain": 1.0, "inner": {"size": 3}})
+    assert nested == OuterConfig(gain=1.0, inner=InnerConfig(size=3))
+    assert replace_config(nested, {"inner.size": 4}).inner == InnerConfig(size=4)
+    assert nested.to_dict() == {"gain": 1.0, "inner": {"size": 3, "names": ["a"]}}
+    assert leaf_values(nested) == {"gain": 1.0, "inner.size": 3, "inner.names": ("a",)}
+    assert [name for name, _ in leaf_specs(OuterConfig)] == ["gain", "inner.size", "inner.names"]
+    with pytest.raises(ConfigError, match=r"InnerConfig\.size=0 is below its minimum"):
+        config_from_mapping(OuterConfig, {"inner.size": 0})
+    with pytest.raises(ConfigError, match=r"unknown OuterConfig parameter\(s\): inner\.sise .*inner\.size"):
+        config_from_mapping(OuterConfig, {"inner.sise": 3})
+    with pytest.raises(ConfigError, match="unknown"):
+        config_from_mapping(OuterConfig, {"gain.x": 3})
+    with pytest.raises(ConfigError, match="must be a InnerConfig or a mapping"):
+        OuterConfig(inner=3)  # type: ignore[arg-type]
+
+
+def test_a_section_is_a_nested_mapping_in_the_yaml(tmp_path: Path) -> None:
+    text = config_yaml(OuterConfig, node_name="demo_node")
+    assert "    inner:\n      # Size. Range [1, inf].\n      size: 20\n" in text
+    path = tmp_path / "demo.yaml"
+    path.write_text(text.replace("size: 20", "size: 7"))
+    assert load_config_yaml(OuterConfig, path) == OuterConfig(inner=InnerConfig(size=7))

@@ -5,15 +5,10 @@ import numpy as np
 import pytest
 import yaml
 
+from lightfast import cli
 from lightfast.camera import PinholeCamera
-from lightfast.daylight.crf import (
-    CameraResponse,
-    CrfError,
-    calibrate_from_bracket,
-    load_crf,
-    main_crf_calibrate,
-    save_crf,
-)
+from lightfast.daylight.crf import CameraResponse, calibrate_from_bracket, calibrate_from_files, load_crf, save_crf
+from lightfast.daylight.errors import CrfError
 from lightfast.errors import LightfastError
 from lightfast.sim.daylight_recordings import _camera_yaml
 from lightfast.sim.gt_renderer import CameraResponse as SimCameraResponse
@@ -166,11 +161,11 @@ def test_cli_calibrate(tmp_path):
         cv2.imwrite(str(p), img[..., ::-1])
         paths.append(str(p))
     out = tmp_path / "crf.yaml"
-    assert main_crf_calibrate([*paths, "--exposures", *map(str, times), "-o", str(out)]) == 0
+    assert cli.main(["crf", "calibrate", *paths, "--exposures", *map(str, times), "-o", str(out)]) == 0
     crf = load_crf(out)
     assert recovered_error(crf).max() < 0.02
     assert crf.exposure_s == pytest.approx(float(np.median(times)))
     with pytest.raises(CrfError, match="cannot read"):
-        main_crf_calibrate([str(tmp_path / "nope.png"), paths[0], "--exposures", "1", "2", "-o", str(out)])
+        calibrate_from_files([tmp_path / "nope.png", paths[0]], [1.0, 2.0], out)
     with pytest.raises(SystemExit):
-        main_crf_calibrate([*paths, "--exposures", "1", "-o", str(out)])
+        cli.main(["crf", "calibrate", *paths, "--exposures", "1", "-o", str(out)])

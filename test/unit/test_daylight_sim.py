@@ -331,15 +331,15 @@ def test_tiny_recording_roundtrip_caching_and_determinism(tmp_path: Path) -> Non
 
 
 def test_cli_entry_point(tmp_path: Path) -> None:
-    from lightfast.sim.daylight_recordings import main_sim_daylight
+    from lightfast import cli
 
-    code = main_sim_daylight([str(tmp_path / "out"), "--sequences", "DS2.T1", "--frames", "2", "--size", "32x24",
-                              "--resolution", "0.25", "--supersample", "1", "--no-progress"])
+    code = cli.main(["sim", "daylight", str(tmp_path / "out"), "--sequences", "DS2.T1", "--frames", "2", "--size",
+                     "32x24", "--resolution", "0.25", "--supersample", "1", "--no-progress"])
     assert code == 0
     meta = json.loads((tmp_path / "out" / "DS2.T1" / "sequence.json").read_text())
     assert meta["params"]["width"] == 32 and meta["frames"] == 2
     with pytest.raises(SystemExit):
-        main_sim_daylight([str(tmp_path / "out"), "--size", "32by24"])
+        cli.main(["sim", "daylight", str(tmp_path / "out"), "--size", "32by24"])
 
 
 def _wall_with_box() -> ReflectanceMesh:

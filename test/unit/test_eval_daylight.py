@@ -8,8 +8,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from lightfast import cli
 from lightfast.daylight.lighting_map import LightingMapConfig
-from lightfast.eval.daylight import EvalError, evaluate_daylight, main_eval_daylight, table_markdown
+from lightfast.eval.daylight import evaluate_daylight, table_markdown
+from lightfast.eval.errors import EvalError
 from lightfast.sim.daylight_recordings import generate_daylight_set
 from lightfast.sim.gt_renderer import CacheSettings
 
@@ -78,4 +80,4 @@ def test_bad_inputs_are_clear_errors(sim_dir: Path, tmp_path: Path) -> None:
     with pytest.raises(EvalError, match="no recordings"):
         evaluate_daylight(tmp_path / "nothing", tmp_path)
     with pytest.raises(SystemExit):
-        main_eval_daylight(["--help"])
+        cli.main(["eval", "daylight", "--help"])

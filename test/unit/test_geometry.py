@@ -12,8 +12,7 @@ from hypothesis.extra.numpy import arrays
 from scipy.spatial.transform import Rotation
 
 from lightfast import geometry as g
-from lightfast.errors import LightfastError
-from lightfast.geometry import GeometryError
+from lightfast.errors import GeometryError, LightfastError
 
 finite = st.floats(min_value=-10.0, max_value=10.0, allow_nan=False, allow_infinity=False)
 vec3 = arrays(np.float64, 3, elements=finite)

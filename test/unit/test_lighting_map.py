@@ -7,9 +7,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from lightfast.daylight.lighting_map import LightingMap, LightingMapConfig, LightingMapError, prepare_lighting_map
-from lightfast.daylight.mesh import MeshError, ReflectanceMesh, as_mesh, load_ply, save_ply
-from lightfast.daylight.sun import FREIBURG, Site, SiteError
+from lightfast.daylight.errors import LightingMapError, MeshError, SiteError
+from lightfast.daylight.lighting_map import LightingMap, LightingMapConfig, prepare_lighting_map
+from lightfast.daylight.mesh import ReflectanceMesh, as_mesh, load_ply, save_ply
+from lightfast.daylight.sun import FREIBURG, Site
 from lightfast.sim.validation_rooms import box_room_with_window
 from test.helpers import LIGHTFAST, run_bounded
 from test.unit.daylight_scenes import closed_box

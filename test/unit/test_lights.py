@@ -6,14 +6,8 @@ import math
 import numpy as np
 import pytest
 
-from lightfast.daylight.lights import (
-    SUN_ANGULAR_DIAMETER_DEG,
-    LightsError,
-    LightSet,
-    fibonacci_sphere,
-    sky_and_ground,
-    sun_disk,
-)
+from lightfast.daylight.errors import LightsError
+from lightfast.daylight.lights import SUN_ANGULAR_DIAMETER_DEG, LightSet, fibonacci_sphere, sky_and_ground, sun_disk
 
 SUN_RADIUS_DEG = SUN_ANGULAR_DIAMETER_DEG / 2.0
 

@@ -6,16 +6,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from lightfast.daylight.errors import OpeningsError
 from lightfast.daylight.lighting_map import LightingMap, LightingMapConfig, prepare_lighting_map
 from lightfast.daylight.mesh import ReflectanceMesh
-from lightfast.daylight.openings import (
-    Opening,
-    OpeningsError,
-    load_openings,
-    openings_array,
-    save_openings,
-    through_openings,
-)
+from lightfast.daylight.openings import Opening, load_openings, openings_array, save_openings, through_openings
 from lightfast.daylight.sun import FREIBURG
 from lightfast.sim.validation_rooms import box_room_with_window
 

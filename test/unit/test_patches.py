@@ -4,7 +4,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from lightfast.daylight.mesh import MeshError, ReflectanceMesh
+from lightfast.daylight.errors import MeshError
+from lightfast.daylight.mesh import ReflectanceMesh
 from lightfast.daylight.patches import build_patches
 
 

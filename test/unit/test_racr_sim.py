@@ -13,23 +13,17 @@ import numpy as np
 import pytest
 import yaml
 
+from lightfast import cli
 from lightfast.geometry import inverse, make_transform, rotation_angle_deg, so3_exp, so3_log
-from lightfast.sim.racr_platform import (
-    PlatformConfig,
-    PlatformError,
-    PlatformSimulator,
-    VseConfig,
-    motion_duration_s,
-)
+from lightfast.sim.errors import PlatformError, RacrSimError
+from lightfast.sim.racr_platform import PlatformConfig, PlatformSimulator, VseConfig, motion_duration_s
 from lightfast.sim.racr_scenes import (
     REFERENCE_FORMAT,
-    RacrSimError,
     build_scene,
     camera_for_size,
     generate_racr_set,
     load_reference,
     load_scene,
-    main_sim_racr,
     scene_complete,
     scene_specs,
     write_reference,
@@ -333,7 +327,7 @@ def test_reference_loader_refuses_bad_input(indoor, tmp_path: Path) -> None:
 
 def test_generate_caches_and_rebuilds_half_written(tmp_path: Path) -> None:
     out = tmp_path / "racr"
-    assert main_sim_racr([str(out), "--only", "S02", "S15", "--size", "96x72", "--resolution", "0.012",
+    assert cli.main(["sim", "racr", str(out), "--only", "S02", "S15", "--size", "96x72", "--resolution", "0.012",
                           "--no-progress"]) == 0
     dirs = [out / "S02", out / "S15"]
     assert all(scene_complete(d) for d in dirs)

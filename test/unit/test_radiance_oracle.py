@@ -14,21 +14,16 @@ import pytest
 from lightfast.daylight.mesh import as_mesh, merge_meshes
 from lightfast.errors import LightfastError
 from lightfast.raycast import RayCaster
+from lightfast.sim.errors import RadianceError, ValidationRoomError
 from lightfast.sim.radiance_oracle import (
     SUN_SOLID_ANGLE_SR,
-    RadianceError,
     light_description,
     radiance_available,
     radiance_irradiance,
     radiance_irradiance_with_error,
     scene_description,
 )
-from lightfast.sim.validation_rooms import (
-    ValidationRoomError,
-    box_room_with_window,
-    furnished_room,
-    sample_surface_points,
-)
+from lightfast.sim.validation_rooms import box_room_with_window, furnished_room, sample_surface_points
 
 pytestmark = pytest.mark.skipif(
     not radiance_available(), reason="Radiance binaries (oconv, rtrace from pyradiance) not found"

@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 
 from lightfast.camera import PinholeCamera
-from lightfast.errors import LightfastError
-from lightfast.raycast import RayCaster, RaycastError, RayHits
+from lightfast.errors import LightfastError, RaycastError
+from lightfast.raycast import RayCaster, RayHits
 
 # ---------------------------------------------------------------------------------------------------------------
 # meshes

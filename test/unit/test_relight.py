@@ -6,15 +6,16 @@ import numpy as np
 import pytest
 
 from lightfast.camera import PinholeCamera
-from lightfast.daylight.brightness import BrightnessError, relit_image
+from lightfast.daylight.brightness import relit_image
 from lightfast.daylight.crf import CameraResponse
+from lightfast.daylight.errors import BrightnessError
 from lightfast.daylight.lighting_map import LightingMapConfig, prepare_lighting_map
 from lightfast.daylight.relight import DaylightRelighter, RelightConfig, _apply_response, _response_table
 from lightfast.daylight.sun import FREIBURG
 from lightfast.daylight.sun_update import SunEpochAssembler, sun_radiosity
 from lightfast.geometry import compose, inverse, rotation_angle_deg, se3_exp
 from lightfast.sim.validation_rooms import box_room_with_window
-from lightfast.tracking import TrackingError
+from lightfast.tracking.errors import TrackingError
 from lightfast.tracking.pipeline import RGBDTracker, TrackerConfig
 from test.unit.test_brightness import S_TRUE, look_at
 

@@ -11,8 +11,8 @@ from lightfast.camera import PinholeCamera
 from lightfast.config import ConfigError
 from lightfast.errors import LightfastError
 from lightfast.geometry import compose, inverse, rotation_angle_deg, se3_exp
-from lightfast.tracking import TrackingConfig, TrackingError, align, ate_rmse, track_sequence
-from lightfast.tracking.metrics import MetricsError
+from lightfast.tracking import TrackingConfig, align, ate_rmse, track_sequence
+from lightfast.tracking.errors import MetricsError, TrackingError
 from lightfast.tracking.pipeline import TrackerConfig
 from lightfast.tracking.rgbd_odometry import GEOMETRIC_TERMS
 

@@ -6,12 +6,12 @@ import numpy as np
 import pytest
 
 from lightfast.bag import open_bag
+from lightfast.data.errors import DatasetError
 from lightfast.data.sevenscenes import (
     COLOR_INFO_TOPIC,
     COLOR_TOPIC,
     DEPTH_TOPIC,
     GT_POSE_TOPIC,
-    DatasetError,
     SevenScenes,
     colour_offset,
     convert_7scenes,

@@ -11,14 +11,8 @@ import pvlib
 import pytest
 
 from lightfast.config import ConfigError
-from lightfast.daylight.sun import (
-    FREIBURG,
-    Site,
-    SiteError,
-    SunPositionError,
-    enu_to_map,
-    sun_position,
-)
+from lightfast.daylight.errors import SiteError, SunPositionError
+from lightfast.daylight.sun import FREIBURG, Site, enu_to_map, sun_position
 from lightfast.errors import LightfastError
 
 # Reda & Andreas (2004), NREL SPA, Table A4.1 example.

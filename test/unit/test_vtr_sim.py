@@ -11,6 +11,7 @@ import time
 import numpy as np
 import pytest
 
+from lightfast import cli
 from lightfast.bag import open_bag
 from lightfast.ros.convert import camera_from_camera_info, image_to_numpy, pose_stamped_to_matrix
 from lightfast.sim.vtr_recordings import (
@@ -26,7 +27,6 @@ from lightfast.sim.vtr_recordings import (
     drive_route,
     generate_vtr_set,
     load_schedule,
-    main_sim_vtr,
 )
 from lightfast.sim.vtr_route import (
     BASIS,
@@ -334,9 +334,9 @@ def test_cli_and_schedule_file(tmp_path):
     runs = load_schedule(sched)
     assert [r.kind for r in runs] == ["teach", "repeat"] and runs[1].weather == "cloudy"
     with pytest.raises(SystemExit):
-        main_sim_vtr([str(tmp_path / "o"), "--runs", "teach", "--schedule", str(sched)])
+        cli.main(["sim", "vtr", str(tmp_path / "o"), "--runs", "teach", "--schedule", str(sched)])
     with pytest.raises(SystemExit):
-        main_sim_vtr([str(tmp_path / "o"), "--size", "10x"])
+        cli.main(["sim", "vtr", str(tmp_path / "o"), "--size", "10x"])
 
 
 def test_render_speed(renderer, scene, capsys):

@@ -13,15 +13,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from lightfast import cli
+from lightfast.eval.errors import RacrEvalError
 from lightfast.eval.racr import (
     METHODS,
     RacrEvalConfig,
-    RacrEvalError,
     convergence_condition_study,
     evaluate_racr,
     initial_offset,
     load_records,
-    main_eval_racr,
     run_one,
 )
 from lightfast.geometry import rotation_angle_deg
@@ -117,7 +117,7 @@ def test_bad_arguments_are_refused(scenes_dir: Path, tmp_path: Path, capsys) -> 
         evaluate_racr(scenes_dir, tmp_path, scenes=["S07"])
     with pytest.raises(RacrEvalError, match="no scenes"):
         evaluate_racr(tmp_path / "nothing", tmp_path)
-    assert main_eval_racr([str(scenes_dir), str(tmp_path), "--methods", "bogus", "--no-progress"]) == 2
+    assert cli.main(["eval", "racr", str(scenes_dir), str(tmp_path), "--methods", "bogus", "--no-progress"]) == 2
     assert "unknown method" in capsys.readouterr().err
     assert set(METHODS) == {"racr", "racr-serial", "racr-p", "racr-f", "racr-s", "acr"}
 

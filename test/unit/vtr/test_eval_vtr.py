@@ -12,7 +12,9 @@ from dataclasses import asdict
 import numpy as np
 import pytest
 
-from lightfast.eval.vtr import FrameRecord, RepeatRun, VtrEvalError, cdf, evaluate_vtr, main_eval_vtr, overall
+from lightfast import cli
+from lightfast.eval.errors import VtrEvalError
+from lightfast.eval.vtr import FrameRecord, RepeatRun, cdf, evaluate_vtr, overall
 from lightfast.sim.vtr_recordings import DriveConfig, RunSpec, generate_vtr_set
 from lightfast.sim.vtr_route import RouteConfig, StereoRig
 
@@ -125,5 +127,5 @@ def test_bad_inputs(sim_dir, tmp_path, capsys):
     with pytest.raises(VtrEvalError, match="exactly one complete teach run"):
         evaluate_vtr(empty, tmp_path / "o")
     with pytest.raises(SystemExit):
-        main_eval_vtr([str(sim_dir), str(tmp_path / "o"), "--jobs", "0"])
+        cli.main(["eval", "vtr", str(sim_dir), str(tmp_path / "o"), "--jobs", "0"])
     assert "--jobs must be >= 1" in capsys.readouterr().err
