@@ -27,13 +27,12 @@ import sys
 import threading
 import time
 from collections import deque
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, Vector3, Vector3Stamped
-from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 
@@ -54,11 +53,10 @@ from lightfast.ros.convert import (
     pose_stamped_to_matrix,
     stamp_to_ns,
 )
-from lightfast.ros.diagnostics import Level, ProblemLog, diagnostic_array, diagnostic_status, log_at
+from lightfast.ros.diagnostics import Level
 from lightfast.ros.errors import ConversionError
-from lightfast.ros.params import ConfigParameters
+from lightfast.ros.node import LightfastNode
 from lightfast.ros.qos import OUTPUT_QOS, sensor_qos
-from lightfast.ros.ready import announce_ready
 from lightfast.ros.runtime import run_node
 from lightfast.ros.sync import ExactTimePairs
 from lightfast.ros.worker import StepWorker
@@ -105,10 +103,9 @@ class _Frame:
         return 1e-6 * self.arrival[1] + 1e3 * (time.monotonic() - self.arrival[0])
 
 
-class DaylightRelightNode(Node):
+class DaylightRelightNode(LightfastNode[RelightConfig]):
     def __init__(self, **kwargs: Any) -> None:
-        super().__init__(NODE_NAME, **kwargs)
-        self.params = ConfigParameters(self, RelightConfig)
+        super().__init__(NODE_NAME, RelightConfig, status_topic=RELIGHT_STATUS_TOPIC, **kwargs)
         cfg = self.params.config
         if not cfg.lighting_map:
             raise ConfigError("parameter lighting_map is required (a directory made by `lightfast daylight prepare`)")
@@ -118,7 +115,6 @@ class DaylightRelightNode(Node):
         self.relighter = DaylightRelighter(lmap, load_crf(cfg.crf_file), config=cfg)
         self.assembler = SunEpochAssembler(lmap.num_vertices)
         self._warm_up(lmap)
-        self.problems = ProblemLog(self._log)
 
         self._lock = threading.Lock()  # guards everything the input callbacks share with the worker
         self._pairs: ExactTimePairs[tuple[np.ndarray, str, _Arrival], tuple[np.ndarray, _Arrival]] = ExactTimePairs(
@@ -129,7 +125,7 @@ class DaylightRelightNode(Node):
         self._new_sun: tuple[np.ndarray, int] | None = None
         self._new_config: RelightConfig | None = None
         self.params.on_change = self._on_config
-        self.stats = {"frames_in": 0, "poses_in": 0, "references": 0, "dropped_behind": 0, "dropped_unpaired": 0,
+        self.stats |= {"frames_in": 0, "poses_in": 0, "references": 0, "dropped_behind": 0, "dropped_unpaired": 0,
                       "waiting_for_sun": 0, "bad_inputs": 0, "chunks": 0, "dropped_epochs": 0, "time_jumps": 0}
         self._guard = StampGuard(cfg)  # stamps of the paired frames (worker only)
         self._clock_jump: int | None = None  # the node clock after it jumped back, until the worker sees it
@@ -141,7 +137,6 @@ class DaylightRelightNode(Node):
         self.depth_pub = self.create_publisher(Image, REFERENCE_DEPTH_TOPIC, OUTPUT_QOS)
         self.scale_pubs = {name: self.create_publisher(Vector3Stamped, SCALE_TOPIC_PREFIX + name, OUTPUT_QOS)
                            for name in self.relighter.names}
-        self.status_pub = self.create_publisher(DiagnosticArray, RELIGHT_STATUS_TOPIC, OUTPUT_QOS)
         sensor = sensor_qos(cfg)
         self.create_subscription(Image, COLOR_TOPIC, self._on_image, sensor)
         self.create_subscription(CameraInfo, COLOR_INFO_TOPIC, self._on_camera_info, sensor)
@@ -155,7 +150,7 @@ class DaylightRelightNode(Node):
             f"reference {cfg.reference}, method {cfg.method}, sensor QoS {cfg.sensor_reliability}; waiting for the "
             "first complete sun epoch"
         )
-        self._ready_pub = announce_ready(self)  # for `lightfast wait-ready` in launch-free scripts
+        self.announce_ready()
 
     # ---------------------------------------------------------------------------------------------- helpers
 
@@ -164,32 +159,17 @@ class DaylightRelightNode(Node):
         """Build the ray-casting BVH now (it is lazy), so the first frame does not pay for it."""
         lmap.caster.intersect(np.zeros(3), np.array([[0.0, 0.0, 1.0]]))
 
-    def _log(self, level: Level, text: str) -> None:
-        log_at(self.get_logger(), level, text)
+    def publish_status(self, level: Level, message: str, values: Mapping[str, Any] | None = None, *,
+                       stamp_ns: int | None = None) -> None:
+        self._status = (level, message)  # the heartbeat repeats it
+        # stamp_ns: the frame this status is about (None: not about a frame)
+        super().publish_status(level, message, {"stamp_ns": stamp_ns, **(values or {})}, stamp_ns=stamp_ns)
 
-    def _now_ns(self) -> int:
-        return self.get_clock().now().nanoseconds
-
-    def _problem(self, key: str, text: str, level: Level = Level.WARN, stamp_ns: int | None = None) -> None:
-        """Bad input or a failed step: throttled log line and a status message; the node carries on."""
-        self.stats["bad_inputs"] += 1
-        self.problems.report(key, text, level)
-        self._publish_status(level, text, stamp_ns=stamp_ns)
-
-    def _publish_status(self, level: Level, message: str, *, stamp_ns: int | None = None) -> None:
-        self._status = (level, message)
+    def status_values(self) -> dict[str, Any]:
         a = self.assembler
-        values: dict[str, Any] = {
-            "sun_epoch_ns": self.relighter.sun_epoch_ns,
-            "pending_epoch_ns": a.pending_epoch_ns,
-            "chunk_progress": a.progress if a.pending_epoch_ns is not None else None,
-            **self.stats,
-            "queued": len(self._queue),
-            "stamp_ns": stamp_ns,  # the frame this status is about (None: not about a frame)
-            **self._last,
-        }
-        stamp = self._now_ns() if stamp_ns is None else stamp_ns
-        self.status_pub.publish(diagnostic_array(stamp, [diagnostic_status(NODE_NAME, level, message, values)]))
+        return {"sun_epoch_ns": self.relighter.sun_epoch_ns, "pending_epoch_ns": a.pending_epoch_ns,
+                "chunk_progress": a.progress if a.pending_epoch_ns is not None else None, **self.stats,
+                "queued": len(self._queue), **self._last}
 
     def _heartbeat(self) -> None:
         if not self.relighter.ready:
@@ -197,7 +177,7 @@ class DaylightRelightNode(Node):
             progress = f" (epoch {a.pending_epoch_ns} at {100 * a.progress:.0f}%)" if a.pending_epoch_ns else ""
             self.problems.report("waiting", f"no reference yet: waiting for the first complete sun epoch on "
                                  f"{SUN_CHUNK_TOPIC}{progress}", Level.OK)
-        self._publish_status(*self._status)
+        self.publish_status(*self._status)
 
     # ---------------------------------------------------------------------------------------------- inputs
 
@@ -206,7 +186,7 @@ class DaylightRelightNode(Node):
             stamp = stamp_to_ns(msg.header.stamp)
             rgb = image_to_rgb(msg)
         except ConversionError as exc:
-            self._problem("image", f"dropped colour image on {COLOR_TOPIC}: {exc}")
+            self.problem("image", f"dropped colour image on {COLOR_TOPIC}: {exc}")
             return
         arrival = self._arrival(stamp)
         with self._lock:
@@ -220,7 +200,7 @@ class DaylightRelightNode(Node):
             if frame_id not in ("", self.params.config.map_frame):
                 raise ConversionError(f"frame_id {frame_id!r} is not {self.params.config.map_frame!r}")
         except ConversionError as exc:
-            self._problem("pose", f"dropped coarse pose on {COARSE_POSE_TOPIC}: {exc}")
+            self.problem("pose", f"dropped coarse pose on {COARSE_POSE_TOPIC}: {exc}")
             return
         arrival = self._arrival(stamp)
         with self._lock:
@@ -228,7 +208,7 @@ class DaylightRelightNode(Node):
             self._enqueue(stamp, self._pairs.add_second(stamp, (T, arrival)))
 
     def _arrival(self, stamp: int) -> _Arrival:
-        return time.monotonic(), max(0, self._now_ns() - stamp)
+        return time.monotonic(), max(0, self.now_ns() - stamp)
 
     def _enqueue(self, stamp: int, pair: tuple[tuple[np.ndarray, str, _Arrival], tuple[np.ndarray, _Arrival]] | None
                  ) -> None:
@@ -248,7 +228,7 @@ class DaylightRelightNode(Node):
         try:
             camera = self._read_camera_info(msg)
         except ConversionError as exc:
-            self._problem("camera_info", f"ignored {COLOR_INFO_TOPIC}: {exc}")
+            self.problem("camera_info", f"ignored {COLOR_INFO_TOPIC}: {exc}")
             return
         with self._lock:
             self._camera = camera
@@ -266,7 +246,7 @@ class DaylightRelightNode(Node):
                     return
                 complete = self.assembler.add(epoch, points["vertex"], radiosity)
         except (ConversionError, ValueError) as exc:
-            self._problem("chunk", f"dropped sun chunk on {SUN_CHUNK_TOPIC}: {exc}", Level.ERROR)
+            self.problem("chunk", f"dropped sun chunk on {SUN_CHUNK_TOPIC}: {exc}", Level.ERROR)
             return
         self.stats["chunks"] += 1
         if complete is not None:
@@ -277,7 +257,7 @@ class DaylightRelightNode(Node):
     def _epoch_ok(self, epoch: int) -> bool:
         """(Under the input lock.) Refuse a sun epoch stamped implausibly far ahead of the clock, or older than the
         one in use; one log line per dropped epoch."""
-        now = self._now_ns()
+        now = self.now_ns()
         ahead_ns = round(self.params.config.max_sun_epoch_ahead_s * 1e9)
         if ahead_ns > 0 and now > 0 and epoch - now > ahead_ns:
             why = (f"stamped {(epoch - now) * 1e-9:.1f} s ahead of this node's clock (max_sun_epoch_ahead_s "
@@ -316,7 +296,7 @@ class DaylightRelightNode(Node):
     # ---------------------------------------------------------------------------------------------- worker
 
     def _on_step_error(self, exc: Exception) -> None:
-        self._problem("internal", f"relight step failed: {exc!r}", Level.ERROR)
+        self.problem("internal", f"relight step failed: {exc!r}", Level.ERROR)
 
     def destroy_node(self) -> None:
         self._worker.stop()
@@ -340,7 +320,7 @@ class DaylightRelightNode(Node):
             self.relighter.set_sun_radiosity(*new_sun)
             self.get_logger().info(f"sun epoch {new_sun[1]} complete: B̂_sun swapped in"
                                    + ("; publishing references" if first else ""))
-            self._publish_status(Level.OK, f"sun epoch {new_sun[1]} swapped in")
+            self.publish_status(Level.OK, f"sun epoch {new_sun[1]} swapped in")
         if frame is not None and self._stamp_ok(frame.stamp_ns):
             self._process(frame, camera)
         return more
@@ -348,10 +328,10 @@ class DaylightRelightNode(Node):
     def _stamp_ok(self, stamp: int) -> bool:
         """Refuse a frame stamped ahead of the clock; restart the time-dependent state when the stamps went back.
         (Frames are relit independently: one slightly out of order is relit as it is.)"""
-        now = self._now_ns()
+        now = self.now_ns()
         verdict = self._guard.check(stamp, now)
         if verdict is StampVerdict.AHEAD:
-            self._problem("stamp", f"frame {stamp}: {self._guard.describe(verdict, stamp, now)}", stamp_ns=stamp)
+            self.problem("stamp", f"frame {stamp}: {self._guard.describe(verdict, stamp, now)}", stamp_ns=stamp)
             return False
         if verdict is StampVerdict.JUMPED_BACK:
             with self._lock:
@@ -363,11 +343,11 @@ class DaylightRelightNode(Node):
     def _process(self, f: _Frame, camera: PinholeCamera | None) -> None:
         stamp = f.stamp_ns
         if camera is None:
-            self._problem("no_camera_info", f"no reference for frame {stamp}: no camera_info on {COLOR_INFO_TOPIC} "
+            self.problem("no_camera_info", f"no reference for frame {stamp}: no camera_info on {COLOR_INFO_TOPIC} "
                           "yet", stamp_ns=stamp)
             return
         if f.rgb.shape[:2] != camera.shape:
-            self._problem("size", f"no reference for frame {stamp}: colour image is {f.rgb.shape[1]}x"
+            self.problem("size", f"no reference for frame {stamp}: colour image is {f.rgb.shape[1]}x"
                           f"{f.rgb.shape[0]}, camera_info says {camera.width}x{camera.height}", stamp_ns=stamp)
             return
         if not self.relighter.ready:
@@ -376,13 +356,13 @@ class DaylightRelightNode(Node):
             progress = f" (epoch {a.pending_epoch_ns} at {100 * a.progress:.0f}%)" if a.pending_epoch_ns else ""
             self.problems.report("waiting", f"no reference yet: waiting for the first complete sun epoch on "
                                  f"{SUN_CHUNK_TOPIC}{progress}", Level.OK)
-            self._publish_status(Level.WARN, "waiting for the first complete sun epoch", stamp_ns=stamp)
+            self.publish_status(Level.WARN, "waiting for the first complete sun epoch", stamp_ns=stamp)
             return
         t0 = time.perf_counter()
         try:
             ref = self.relighter.step(stamp, f.rgb, f.T_map_cam, camera)
         except LightfastError as exc:
-            self._problem("step", f"no reference for frame {stamp}: {exc}", Level.ERROR, stamp_ns=stamp)
+            self.problem("step", f"no reference for frame {stamp}: {exc}", Level.ERROR, stamp_ns=stamp)
             return
         self._publish_reference(ref, f.frame_id)
         self.stats["references"] += 1
@@ -394,7 +374,7 @@ class DaylightRelightNode(Node):
             "pose_latency_ms": f.pose_latency_ms,  # image stamp -> coarse pose here (tracker f2f + transport)
             "latency_ms": f.latency_ms(),  # image stamp -> reference published
         }
-        self._publish_status(Level.OK, "reference published", stamp_ns=stamp)
+        self.publish_status(Level.OK, "reference published", stamp_ns=stamp)
 
     def _publish_reference(self, ref: Reference, frame_id: str) -> None:
         stamp = ref.stamp_ns

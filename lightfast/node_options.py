@@ -24,12 +24,13 @@ class SensorInputOptions(Config):
     sensor_reliability: str = param(
         "best_effort", choices=SENSOR_RELIABILITIES, read_only=True,
         description="QoS reliability of the sensor subscriptions (images, camera_info, clouds). best_effort (like "
-        "qos_profile_sensor_data) receives from best-effort and reliable publishers alike; reliable asks for "
-        "lossless delivery (replays, tests) but receives nothing from a best-effort driver.",
+        "qos_profile_sensor_data) receives from best-effort and reliable publishers alike; reliable (with KEEP_ALL "
+        "history) asks for lossless delivery (replays, tests) but receives nothing from a best-effort driver.",
     )
     sensor_queue_depth: int = param(
-        5, min=1, max=1000, read_only=True,
-        description="History depth of the sensor subscriptions, messages per topic (5: 0.17 s at 30 Hz).",
+        10, min=1, max=1000, read_only=True,
+        description="History depth of the best-effort sensor subscriptions, messages per topic (10: 0.33 s at "
+        "30 Hz); the oldest are lost when the node falls further behind.",
     )
 
 

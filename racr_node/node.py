@@ -222,9 +222,9 @@ class RacrNode(Node):
         try:
             ref = load_reference(self.reference_path, scene=cfg.reference_scene or None)
             session = RacrSession(
-                ref.points_m, ref.T_ref_camref, config=cfg.session_config(), scheme_config=cfg.scheme_config(),
-                fast_config=cfg.fast_config(), fine_config=cfg.fine_config(),
-                adjustment_config=cfg.adjustment_config(), init_config=cfg.init_config(), clock=self._now_s,
+                ref.points_m, ref.T_ref_camref, config=cfg.session, scheme_config=cfg.scheme, fast_config=cfg.fast,
+                fine_config=cfg.fine, adjustment_config=cfg.adjustment, init_config=cfg.initialization,
+                clock=self._now_s,
             )
         except (LightfastError, OSError) as exc:
             first = self._reference_error is None
@@ -446,7 +446,7 @@ class RacrNode(Node):
         cfg = self.config
         values: dict[str, Any] = {"reference_path": str(self.reference_path), **self.stats,
                                   "platform_subscribed": self.motion_pub.get_subscription_count() > 0,
-                                  "eta": cfg.eta, "mode": cfg.mode}
+                                  "eta": cfg.adjustment.eta, "mode": cfg.scheme.mode}
         session = self.session
         if session is None:
             level, message, stage = Level.ERROR, self._reference_error or "loading the reference", STAGE_NO_REFERENCE

@@ -36,10 +36,8 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
 from nav_msgs.msg import Odometry
-from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, Image
 
 from lightfast.camera import PinholeCamera
@@ -54,11 +52,10 @@ from lightfast.ros.convert import (
     pose_with_covariance_to_matrix,
     stamp_to_ns,
 )
-from lightfast.ros.diagnostics import Level, ProblemLog, diagnostic_array, diagnostic_status, log_at
+from lightfast.ros.diagnostics import Level
 from lightfast.ros.errors import ConversionError
-from lightfast.ros.params import ConfigParameters
+from lightfast.ros.node import LightfastNode
 from lightfast.ros.qos import OUTPUT_QOS, sensor_qos
-from lightfast.ros.ready import announce_ready
 from lightfast.ros.runtime import run_node
 from lightfast.ros.sync import ExactTimePairs
 from lightfast.ros.tf import TransformBroadcaster, transform_stamped
@@ -124,14 +121,12 @@ class _Pending:
     coarse_at: float  # time.monotonic() when T≈ was published: the reference deadline counts from here
 
 
-class RGBDTrackerNode(Node):
+class RGBDTrackerNode(LightfastNode[TrackerConfig]):
     def __init__(self, **kwargs: Any) -> None:
-        super().__init__(NODE_NAME, **kwargs)
-        self.params = ConfigParameters(self, TrackerConfig)
+        super().__init__(NODE_NAME, TrackerConfig, status_topic=TRACKER_STATUS_TOPIC, **kwargs)
         cfg = self.params.config
-        self.config = cfg
+        self.config = cfg  # the configuration in use: the f2f worker applies a change between frames
         warm_s = warm_up(cfg)
-        self.problems = ProblemLog(self._log)
         self.tracker: RGBDTracker | None = None
         self._start_pose = cfg.T_map_cam_initial  # where the tracker (re)starts when it is created
         self._last_pose: np.ndarray | None = None  # newest T≈, to restart from after a camera/config change
@@ -151,14 +146,13 @@ class RGBDTrackerNode(Node):
         self._announce_start = True  # log where tracking starts at the next first frame
         self._new_config: TrackerConfig | None = None
         self.params.on_change = self._on_config
-        self.stats = {"frames_in": 0, "references_in": 0, "frames_tracked": 0, "f2m": 0, "f2f": 0, "dropped_behind": 0,
-                      "dropped_unpaired": 0, "late_references": 0, "superseded_references": 0, "bad_inputs": 0,
-                      "time_jumps": 0}
+        self.stats |= {"frames_in": 0, "references_in": 0, "frames_tracked": 0, "f2m": 0, "f2f": 0,
+                       "dropped_behind": 0, "dropped_unpaired": 0, "late_references": 0, "superseded_references": 0,
+                       "time_jumps": 0}
 
         self.coarse_pub = self.create_publisher(PoseStamped, COARSE_POSE_TOPIC, OUTPUT_QOS)
         self.pose_pub = self.create_publisher(PoseStamped, TRACKER_POSE_TOPIC, OUTPUT_QOS)
         self.odom_pub = self.create_publisher(Odometry, TRACKER_ODOMETRY_TOPIC, OUTPUT_QOS)
-        self.status_pub = self.create_publisher(DiagnosticArray, TRACKER_STATUS_TOPIC, OUTPUT_QOS)
         self.tf = TransformBroadcaster(self) if cfg.publish_tf else None
         sensor = sensor_qos(cfg)
         sub = self.create_subscription
@@ -176,7 +170,7 @@ class RGBDTrackerNode(Node):
         self.get_logger().info(f"mode {cfg.mode}, reference timeout {cfg.reference_timeout_s} s, start pose "
                                f"{list(cfg.initial_pose)} in {cfg.map_frame}, sensor QoS {cfg.sensor_reliability}; "
                                f"kernels warmed up in {warm_s:.2f} s")
-        self._ready_pub = announce_ready(self)  # for `lightfast wait-ready` in launch-free scripts
+        self.announce_ready()
 
     # ---------------------------------------------------------------------------------------------- helpers
 
@@ -184,20 +178,11 @@ class RGBDTrackerNode(Node):
     def _deadline_period(cfg: TrackerConfig) -> float:
         return min(0.1, max(0.01, cfg.reference_timeout_s / 4))
 
-    def _log(self, level: Level, text: str) -> None:
-        log_at(self.get_logger(), level, text)
-
     def _problem(self, key: str, text: str, level: Level = Level.WARN, stamp_ns: int | None = None) -> None:
-        """Bad input or a failed step: throttled log line and a status message; the node carries on."""
-        self.stats["bad_inputs"] += 1
-        self.problems.report(key, text, level)
-        self._publish_status(level, text, {"stamp_ns": stamp_ns, "source": "", "reason": text}, stamp_ns=stamp_ns)
+        self.problem(key, text, level, stamp_ns=stamp_ns, values={"stamp_ns": stamp_ns, "source": "", "reason": text})
 
-    def _publish_status(self, level: Level, message: str, values: dict[str, Any], *,
-                        stamp_ns: int | None = None) -> None:
-        all_values = {**values, "mode": self.config.mode, "pending": len(self._pending), **self.stats}
-        stamp = self.get_clock().now().nanoseconds if stamp_ns is None else stamp_ns
-        self.status_pub.publish(diagnostic_array(stamp, [diagnostic_status(NODE_NAME, level, message, all_values)]))
+    def status_values(self) -> dict[str, Any]:
+        return {"mode": self.config.mode, "pending": len(self._pending), **self.stats}
 
     # ---------------------------------------------------------------------------------------------- inputs
 
@@ -399,7 +384,7 @@ class RGBDTrackerNode(Node):
         self._last_pose = T
         self._announce_start = False
         self.get_logger().info(f"tracking reset on {topic} to {np.round(T[:3, 3], 3).tolist()} m")
-        self._publish_status(Level.OK, "tracking reset", {"stamp_ns": stamp, "source": "reset", "reason": ""})
+        self.publish_status(Level.OK, "tracking reset", {"stamp_ns": stamp, "source": "reset", "reason": ""})
 
     def _start_track(self, f: _Frame, camera: PinholeCamera | None) -> F2FJob | None:
         stamp = f.stamp_ns
@@ -528,7 +513,7 @@ class RGBDTrackerNode(Node):
             "pipeline_ms": 1e3 * pipeline_s,  # wall time from the paired frame to here
         }
         level = Level.OK if r.source == "f2m" else Level.WARN
-        self._publish_status(level, r.source + (f": {r.reason}" if r.reason else ""), values, stamp_ns=r.stamp_ns)
+        self.publish_status(level, r.source + (f": {r.reason}" if r.reason else ""), values, stamp_ns=r.stamp_ns)
 
 
 def main(args: list[str] | None = None) -> int:

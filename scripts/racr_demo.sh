@@ -73,7 +73,7 @@ pids+=("$!")
   >"$logs/vse.log" 2>&1 &
 pids+=("$!")
 "$bin/racr_node" --ros-args -p reference_path:="$scene/reference" -p reference_scene:="$scene_name" \
-  -p mode:="$mode" -p eta:="$eta" -p sensor_reliability:="$sensor" >"$logs/racr.log" 2>&1 &
+  -p scheme.mode:="$mode" -p adjustment.eta:="$eta" -p sensor_reliability:="$sensor" >"$logs/racr.log" 2>&1 &
 pids+=("$!")
 
 rc=0

@@ -76,7 +76,7 @@ pids+=("$teach_pid")
 stop "$teach_pid"
 
 echo "== repeat ($mode): vtr_localizer_node on $repeat_bag against $map, output recorded to $recorded"
-"$bin/vtr_localizer_node" --ros-args -p mode:=repeat -p map_path:="$map" -p repeat_mode:="$mode" \
+"$bin/vtr_localizer_node" --ros-args -p mode:=repeat -p map_path:="$map" -p repeat.mode:="$mode" \
   -p sensor_reliability:="$sensor" \
   >"$logs/repeat.log" 2>&1 &
 repeat_pid=$!

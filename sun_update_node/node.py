@@ -11,10 +11,10 @@ one for the new time starts.
 from __future__ import annotations
 
 import sys
+from typing import Any
 
 import numpy as np
 from geometry_msgs.msg import Vector3, Vector3Stamped
-from rclpy.node import Node
 from sensor_msgs.msg import PointCloud2
 
 from lightfast.config import ConfigError
@@ -24,15 +24,15 @@ from lightfast.daylight.sun_update import SunChunk, SunUpdateConfig, SunUpdatePi
 from lightfast.errors import LightfastError
 from lightfast.ros.clock import on_time_jump_back
 from lightfast.ros.convert import make_header, numpy_to_pointcloud2
-from lightfast.ros.params import ConfigParameters
+from lightfast.ros.node import LightfastNode
 from lightfast.ros.qos import LATCHED_QOS, OUTPUT_QOS
-from lightfast.ros.ready import announce_ready
 from lightfast.ros.runtime import run_node
 from lightfast.topics import SUN_CHUNK_TOPIC, SUN_DIRECTION_TOPIC
 
 #: A clock step back larger than this restarts the sun update (ROS time only goes back on sim time: a bag played
 #: again or looped); the sun moves 0.004 deg per second, so smaller steps do not matter.
 TIME_JUMP_BACK_S = 1.0
+NODE_NAME = "sun_update_node"
 CHUNK_DTYPE = np.dtype([("vertex", "<u4"), ("r", "<f4"), ("g", "<f4"), ("b", "<f4")])
 
 
@@ -43,10 +43,9 @@ def chunk_to_array(chunk: SunChunk) -> np.ndarray:
     return out
 
 
-class SunUpdateNode(Node):
-    def __init__(self, **kwargs: object) -> None:
-        super().__init__("sun_update_node", **kwargs)
-        self.params = ConfigParameters(self, SunUpdateConfig)
+class SunUpdateNode(LightfastNode[SunUpdateConfig]):
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__(NODE_NAME, SunUpdateConfig, status_topic=None, **kwargs)
         cfg = self.params.config
         if not cfg.lighting_map:
             raise ConfigError("parameter lighting_map is required (a directory made by `lightfast daylight prepare`)")
@@ -63,10 +62,10 @@ class SunUpdateNode(Node):
             f"lighting map {cfg.lighting_map}: {lmap.num_vertices} vertices, {lmap.patches.count} patches; "
             f"site {self.pipeline.site.latitude_deg:.4f}, {self.pipeline.site.longitude_deg:.4f}"
         )
-        self._ready_pub = announce_ready(self)  # for `lightfast wait-ready` in launch-free scripts
+        self.announce_ready()
 
     def _now_ns(self) -> int | None:
-        now = self.get_clock().now().nanoseconds
+        now = self.now_ns()
         return now if now > 0 else None  # use_sim_time before the first /clock message
 
     def _on_clock_jump(self, now_ns: int, jump_ns: int) -> None:
@@ -104,7 +103,7 @@ class SunUpdateNode(Node):
 
 
 def main(args: list[str] | None = None) -> int:
-    return run_node(SunUpdateNode, "sun_update_node", args)
+    return run_node(SunUpdateNode, NODE_NAME, args)
 
 
 if __name__ == "__main__":

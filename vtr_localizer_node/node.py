@@ -18,7 +18,7 @@ shuts down (Ctrl-C, SIGTERM, ``destroy_node``) before that, the partial teach is
 removed and a previous complete map at ``map_path`` stays as it was. After a finished teach further pairs are
 ignored (the status says so).
 
-``mode: repeat`` localizes against the map (:class:`~lightfast.vtr.repeat.RepeatPipeline`, ``repeat_mode`` fused /
+``mode: repeat`` localizes against the map (:class:`~lightfast.vtr.repeat.RepeatPipeline`, ``repeat.mode`` fused /
 grey / mcmanus). A missing or corrupt map does not stop the node: the status reports why (level ERROR), pairs are
 skipped, and loading is retried every ``map_retry_s`` (e.g. until a teach in another process has finished).
 
@@ -64,17 +64,16 @@ import sys
 import threading
 import time
 from collections import deque
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import cv2
 import numpy as np
-from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseWithCovarianceStamped
 from nav_msgs.msg import Odometry
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
-from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, Image
 from std_srvs.srv import Trigger
 
@@ -90,11 +89,10 @@ from lightfast.ros.convert import (
     numpy_to_image,
     stamp_to_ns,
 )
-from lightfast.ros.diagnostics import Level, ProblemLog, diagnostic_array, diagnostic_status, log_at
+from lightfast.ros.diagnostics import Level
 from lightfast.ros.errors import ConversionError
-from lightfast.ros.params import ConfigParameters
+from lightfast.ros.node import LightfastNode
 from lightfast.ros.qos import OUTPUT_QOS, sensor_qos
-from lightfast.ros.ready import announce_ready
 from lightfast.ros.runtime import run_node
 from lightfast.ros.sync import ExactTimePairs
 from lightfast.ros.tf import TransformBroadcaster, transform_stamped
@@ -175,16 +173,14 @@ class _Frame:
     received: float  # time.monotonic() when the pair was complete
 
 
-class VtrLocalizerNode(Node):
+class VtrLocalizerNode(LightfastNode[VtrLocalizerConfig]):
     def __init__(self, **kwargs: Any) -> None:
-        super().__init__(NODE_NAME, **kwargs)
-        self.params = ConfigParameters(self, VtrLocalizerConfig)
+        super().__init__(NODE_NAME, VtrLocalizerConfig, status_topic=VTR_STATUS_TOPIC, **kwargs)
         cfg = self.params.config
         self.config = cfg
         if not cfg.map_path:
             raise ConfigError("parameter map_path is required (the teach map directory)")
         self.map_path = Path(cfg.map_path).expanduser()
-        self.problems = ProblemLog(self._log)
         self.teach: TeachPipeline | None = None
         self.repeat: RepeatPipeline | None = None
         self.finished: TeachMap | None = None  # the map a finished teach wrote
@@ -193,7 +189,7 @@ class VtrLocalizerNode(Node):
         warm_up()  # the jitted RANSAC scoring: compiled (or loaded) now, not on the first stereo pair
         if cfg.mode == "teach":
             self._check_teach_target(cfg)
-            self.teach = TeachPipeline(self.map_path, cfg.teach_config(), stereo=cfg.stereo_config(),
+            self.teach = TeachPipeline(self.map_path, cfg.teach, stereo=cfg.stereo,
                                        overwrite=cfg.overwrite_map)
 
         self._lock = threading.Lock()  # guards everything the input callbacks share with the worker
@@ -204,7 +200,7 @@ class VtrLocalizerNode(Node):
         self._last_stamp_ns: int | None = None
         self._guard = StampGuard(cfg)  # stamps of the stereo pairs (worker only)
         self._clock_jump: int | None = None  # the node clock after it jumped back, until the worker sees it
-        self.stats = {"frames_in": 0, "frames_done": 0, "dropped_behind": 0, "dropped_unpaired": 0, "bad_inputs": 0,
+        self.stats |= {"frames_in": 0, "frames_done": 0, "dropped_behind": 0, "dropped_unpaired": 0,
                       "ignored": 0, "time_jumps": 0}
         self._status: tuple[Level, str] = (Level.OK, "waiting for stereo pairs")
 
@@ -212,7 +208,6 @@ class VtrLocalizerNode(Node):
         work = MutuallyExclusiveCallbackGroup()
         self.localization_pub = self.create_publisher(PoseWithCovarianceStamped, VTR_LOCALIZATION_TOPIC, OUTPUT_QOS)
         self.odom_pub = self.create_publisher(Odometry, VTR_ODOMETRY_TOPIC, OUTPUT_QOS)
-        self.status_pub = self.create_publisher(DiagnosticArray, VTR_STATUS_TOPIC, OUTPUT_QOS)
         self.image_pubs = {"fv": self.create_publisher(Image, VTR_FV_TOPIC, OUTPUT_QOS),
                            "fr": self.create_publisher(Image, VTR_FR_TOPIC, OUTPUT_QOS)}
         self.tf = TransformBroadcaster(self) if cfg.publish_tf else None
@@ -228,12 +223,12 @@ class VtrLocalizerNode(Node):
                                                   callback_group=work)
         self.status_timer = self.create_timer(STATUS_PERIOD_S, self._heartbeat, callback_group=work)
         if cfg.mode == "teach":
-            self.get_logger().info(f"teach: building a map at {self.map_path} ({', '.join(cfg.teach_sources)}, "
-                                   f"{cfg.feature}); finish it with {VTR_FINISH_TEACH_SERVICE}")
+            self.get_logger().info(f"teach: building a map at {self.map_path} ({', '.join(cfg.teach.sources)}, "
+                                   f"{cfg.stereo.feature}); finish it with {VTR_FINISH_TEACH_SERVICE}")
         else:
-            self.get_logger().info(f"repeat ({cfg.repeat_mode}) against the map at {self.map_path}")
+            self.get_logger().info(f"repeat ({cfg.repeat.mode}) against the map at {self.map_path}")
             self._load_map()
-        self._ready_pub = announce_ready(self)  # for `lightfast wait-ready` in launch-free scripts
+        self.announce_ready()
 
     # ---------------------------------------------------------------------------------------------- helpers
 
@@ -248,38 +243,32 @@ class VtrLocalizerNode(Node):
         if not cfg.overwrite_map:
             raise ConfigError(f"map_path {path} exists (an empty directory): set overwrite_map to teach into it")
 
-    def _log(self, level: Level, text: str) -> None:
-        log_at(self.get_logger(), level, text)
-
     def _problem(self, key: str, text: str, level: Level = Level.WARN, stamp_ns: int | None = None, *,
                  count: bool = True) -> None:
-        """Bad input or a failed step: throttled log line and a status message; the node carries on."""
-        if count:
-            self.stats["bad_inputs"] += 1
-        self.problems.report(key, text, level)
-        self._publish_status(level, text, {"stamp_ns": stamp_ns, "problem": key}, stamp_ns=stamp_ns)
+        self.problem(key, text, level, stamp_ns=stamp_ns, values={"stamp_ns": stamp_ns, "problem": key}, count=count)
 
-    def _publish_status(self, level: Level, message: str, values: dict[str, Any] | None = None, *,
-                        stamp_ns: int | None = None) -> None:
-        self._status = (level, message)
+    def publish_status(self, level: Level, message: str, values: Mapping[str, Any] | None = None, *,
+                       stamp_ns: int | None = None) -> None:
+        self._status = (level, message)  # the heartbeat repeats it
+        super().publish_status(level, message, values, stamp_ns=stamp_ns)
+
+    def status_values(self) -> dict[str, Any]:
         cfg = self.config
         common: dict[str, Any] = {"mode": cfg.mode, "map_path": str(self.map_path)}
         if cfg.mode == "repeat":
-            common |= {"repeat_mode": cfg.repeat_mode, "map_loaded": self.repeat is not None,
+            common |= {"repeat_mode": cfg.repeat.mode, "map_loaded": self.repeat is not None,
                        "map_error": self._map_error or ""}
         else:
             teach = self.teach
             common |= {"teach_finished": self.finished is not None,
                        "keyframes": len(self.finished) if self.finished is not None else
                        (teach.num_keyframes if teach is not None else 0)}
-        all_values = {**common, **self.stats, "queued": len(self._frames), **(values or {})}
-        stamp = self.get_clock().now().nanoseconds if stamp_ns is None else stamp_ns
-        self.status_pub.publish(diagnostic_array(stamp, [diagnostic_status(NODE_NAME, level, message, all_values)]))
+        return {**common, **self.stats, "queued": len(self._frames)}
 
     def _heartbeat(self) -> None:
         if self.config.mode == "repeat" and self.repeat is None:
             self._load_map()
-        self._publish_status(*self._status)
+        self.publish_status(*self._status)
         if self._frames:
             self.work_trigger.trigger()  # pairs that waited for camera_info in vain are reported now
 
@@ -293,7 +282,7 @@ class VtrLocalizerNode(Node):
         self._map_attempt = now
         try:
             teach_map = MapStore.load(self.map_path)
-            self.repeat = RepeatPipeline(teach_map, self.config.repeat_config())
+            self.repeat = RepeatPipeline(teach_map, self.config.repeat)
         except (MapError, VtrError, ConfigError, OSError) as exc:
             self._map_error = f"no usable teach map: {exc}"
             self._problem(f"map:{type(exc).__name__}", f"{self._map_error} (retrying every "
@@ -304,7 +293,7 @@ class VtrLocalizerNode(Node):
         text = (f"map loaded: {len(m)} keyframes, {m.length_m:.2f} m, sources {','.join(m.sources)}, "
                 f"{m.feature}, {m.image_size[0]}x{m.image_size[1]}")
         self.get_logger().info(text)
-        self._publish_status(Level.OK, text)
+        self.publish_status(Level.OK, text)
         return True
 
     # ---------------------------------------------------------------------------------------------- inputs
@@ -377,7 +366,7 @@ class VtrLocalizerNode(Node):
         self._T_odom_cam = np.eye(4)
         self._last_stamp_ns = None
         if self.repeat is not None:
-            self.repeat = RepeatPipeline(self.repeat.map, self.config.repeat_config())
+            self.repeat = RepeatPipeline(self.repeat.map, self.config.repeat)
         self.get_logger().warning(f"{why} (a bag played again, or looped?): the repeat starts over with a search of "
                                   "the whole map, the VO chain at its origin")
 
@@ -455,7 +444,7 @@ class VtrLocalizerNode(Node):
             text = ("teach finished: map written to " + str(self.map_path)) if self.finished is not None else \
                 "teach aborted"
             self.problems.report("finished", f"stereo pair {f.stamp_ns} ignored: {text}", Level.OK)
-            self._publish_status(Level.OK, text, {"stamp_ns": f.stamp_ns})
+            self.publish_status(Level.OK, text, {"stamp_ns": f.stamp_ns})
             return
         if self.config.mode == "repeat" and not self._load_map():
             self._problem("no_map", f"stereo pair {f.stamp_ns} skipped: {self._map_error}", Level.ERROR, f.stamp_ns,
@@ -502,7 +491,7 @@ class VtrLocalizerNode(Node):
                                      f"taught ({r.distance_m:.2f} m from keyframe 0)")
         else:
             level, text = Level.WARN, "VO failed: the constant-velocity prediction is chained"
-        self._publish_status(level, text, values, stamp_ns=f.stamp_ns)
+        self.publish_status(level, text, values, stamp_ns=f.stamp_ns)
 
     def _drain(self) -> None:
         """Process every queued pair now (before the teach is finished)."""
@@ -532,7 +521,7 @@ class VtrLocalizerNode(Node):
         if teach.num_keyframes == 0:
             response.success = False
             response.message = f"nothing taught yet (no usable stereo pair): no map written to {self.map_path}"
-            self._publish_status(Level.WARN, response.message)
+            self.publish_status(Level.WARN, response.message)
             return response
         try:
             m = teach.finish()
@@ -548,7 +537,7 @@ class VtrLocalizerNode(Node):
         response.message = (f"map written to {self.map_path}: {len(m)} keyframes, {m.length_m:.2f} m path, "
                             f"{teach.frames} stereo pairs, {teach.vo_failures} VO failures")
         self.get_logger().info(response.message)
-        self._publish_status(Level.OK, response.message, {"path_length_m": m.length_m})
+        self.publish_status(Level.OK, response.message, {"path_length_m": m.length_m})
         return response
 
     # ---------------------------------------------------------------------------------------------- repeat
@@ -604,7 +593,7 @@ class VtrLocalizerNode(Node):
         else:
             level, text = Level.WARN, (f"not localized: on VO for {r.distance_on_vo_m:.2f} m near keyframe "
                                        f"{r.keyframe_index}")
-        self._publish_status(level, text, values, stamp_ns=f.stamp_ns)
+        self.publish_status(level, text, values, stamp_ns=f.stamp_ns)
 
     def _publish_localization(self, f: _Frame, r: RepeatResult) -> None:
         T = r.T_kf_cam

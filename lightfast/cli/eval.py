@@ -61,6 +61,7 @@ def _cmd_eval_racr(args: argparse.Namespace) -> int:
 
 
 def _cmd_eval_vtr(args: argparse.Namespace) -> int:
+    from lightfast.config import config_from_mapping
     from lightfast.eval.vtr import evaluate_vtr
     from lightfast.vtr.localizer_config import VtrLocalizerConfig
 
@@ -70,7 +71,8 @@ def _cmd_eval_vtr(args: argparse.Namespace) -> int:
     if args.jobs < 1:
         args.parser.error("--jobs must be >= 1")
     try:
-        config = VtrLocalizerConfig(workers=args.workers, initial_keyframe=args.initial_keyframe)
+        config = config_from_mapping(VtrLocalizerConfig, {"teach.workers": args.workers, "repeat.workers": args.workers,
+                                                          "repeat.initial_keyframe": args.initial_keyframe})
     except LightfastError as exc:
         args.parser.error(str(exc))
     logging.getLogger(evaluate_vtr.__module__).setLevel(logging.INFO)  # one line per finished run

@@ -10,7 +10,7 @@ Input: a directory written by ``lightfast sim vtr`` (one teach run and any numbe
    unchanged.
 2. **Repeat** every repeat run in every mode (``fused``, ``grey``, ``mcmanus``) in-process through
    :meth:`lightfast.vtr.repeat.RepeatPipeline.step` — the call ``vtr_localizer_node`` makes per stereo pair — with
-   the node's repeat parameters (``repeat_config()``). The method sees the bag's rgb8 images and the
+   the node's repeat parameters (its ``repeat`` section). The method sees the bag's rgb8 images and the
    ``camera_info`` projection matrices only; the first frame starts with the whole-map search, as a node does.
 3. **Score** with the ground truth (``truth.csv``; read here only):
 
@@ -56,6 +56,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from lightfast.bag.reader import open_bag
+from lightfast.config import config_from_mapping, replace_config
 from lightfast.eval.errors import VtrEvalError
 from lightfast.geometry import quat_to_matrix, rotation_angle_deg
 from lightfast.io import write_text_atomic
@@ -193,7 +194,7 @@ def _key(*parts: object) -> str:
 
 def _teach_key(teach: SimRun, config: VtrLocalizerConfig) -> str:
     return _key("teach", EVAL_FORMAT, teach.info.get("params_hash"), teach.info.get("frames"),
-                config.teach_config().to_dict(), config.stereo_config().to_dict())
+                config.teach.to_dict(), config.stereo.to_dict())
 
 
 def teach_map(teach: SimRun, maps_dir: Path, config: VtrLocalizerConfig | None = None, *,
@@ -206,7 +207,7 @@ def teach_map(teach: SimRun, maps_dir: Path, config: VtrLocalizerConfig | None =
         log.info("reusing the teach map %s", path)
         return MapStore.load(path), key
     maps_dir.mkdir(parents=True, exist_ok=True)
-    tp = TeachPipeline(path, config.teach_config(), stereo=config.stereo_config(), overwrite=True)
+    tp = TeachPipeline(path, config.teach, stereo=config.stereo, overwrite=True)
     n = int(teach.info.get("frames", 0)) or None
     t0 = time.perf_counter()
     try:
@@ -364,10 +365,10 @@ def run_repeat(run: SimRun, tmap: TeachMap, teach_truth: Truth, mode: str, *,
     """One repeat run in one mode (module docstring, steps 2–3)."""
     if mode not in MODES:
         raise VtrEvalError(f"unknown mode {mode!r}; choose from {', '.join(MODES)}")
-    cfg = replace(config or VtrLocalizerConfig(), repeat_mode=mode)
+    cfg = replace_config(config or VtrLocalizerConfig(), {"repeat.mode": mode})
     truth = load_truth(run.path)
     kf_T = np.stack([teach_truth.T_map_cam[teach_truth.index(kf.stamp_ns)] for kf in tmap.keyframes])
-    rp = RepeatPipeline(tmap, cfg.repeat_config())
+    rp = RepeatPipeline(tmap, cfg.repeat)
     spec = run.info["run"]
     out = RepeatRun(run.name, mode, {k: spec.get(k) for k in ("date", "start", "weather", "summary", "kind",
                                                               "paper_repeat")})
@@ -685,7 +686,7 @@ def write_outputs(out_dir: Path, runs: Sequence[RepeatRun], modes: Sequence[str]
 
 def _job_key(run: SimRun, mode: str, map_key: str, config: VtrLocalizerConfig, max_frames: int | None) -> str:
     return _key("repeat", EVAL_FORMAT, run.info.get("params_hash"), run.info.get("frames"), mode, map_key,
-                replace(config, repeat_mode=mode).repeat_config().to_dict(), max_frames)
+                replace_config(config, {"repeat.mode": mode}).repeat.to_dict(), max_frames)
 
 
 _JOB_MAP: dict[str, tuple[TeachMap, Truth]] = {}
@@ -699,7 +700,8 @@ def _run_job(job: tuple[str, str, str, str, str, dict[str, Any], int | None]) ->
         _JOB_MAP[map_dir] = (MapStore.load(map_dir), load_truth(Path(teach_dir)))
     tmap, teach_truth = _JOB_MAP[map_dir]
     run = SimRun(Path(run_dir).name, Path(run_dir), json.loads(run_json))
-    return run_repeat(run, tmap, teach_truth, mode, config=VtrLocalizerConfig(**cfg), max_frames=max_frames)
+    return run_repeat(run, tmap, teach_truth, mode, config=config_from_mapping(VtrLocalizerConfig, cfg),
+                      max_frames=max_frames)
 
 
 def evaluate_vtr(sim_dir: Path, out_dir: Path, *, modes: Sequence[str] = MODES, runs: Sequence[str] | None = None,
@@ -764,8 +766,8 @@ def evaluate_vtr(sim_dir: Path, out_dir: Path, *, modes: Sequence[str] = MODES, 
             log.info("report only: %d (run, mode) pairs not evaluated: %s", len(todo),
                      ", ".join(f"{r.name}/{m}" for r, m, _ in todo))
         todo = []
-    limit = config.repeat_config().max_distance_on_vo_m
-    min_inliers = config.repeat_config().min_inliers
+    limit = config.repeat.max_distance_on_vo_m
+    min_inliers = config.repeat.min_inliers
 
     def finished(res: RepeatRun, key: str) -> None:
         write_text_atomic(runs_dir / f"{res.run}.{res.mode}.json",

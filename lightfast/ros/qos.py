@@ -35,12 +35,14 @@ CLOCK_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE, durabi
 
 
 def sensor_qos(options: SensorInputOptions) -> QoSProfile:
-    """The QoS of a sensor subscription: best effort (takes best-effort and reliable publishers) or reliable
-    (lossless, but deaf to best-effort publishers) as the node's options say; KEEP_LAST, volatile."""
+    """The QoS of a sensor subscription, volatile: best effort with KEEP_LAST ``sensor_queue_depth`` (takes
+    best-effort and reliable publishers; a node that falls behind loses the oldest), or reliable with KEEP_ALL
+    (lossless: a reliable publisher waits while the node is busy; deaf to best-effort publishers)."""
     assert options.sensor_reliability in SENSOR_RELIABILITIES  # validated by the options
-    best_effort = options.sensor_reliability == "best_effort"
-    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=options.sensor_queue_depth,
-                      reliability=ReliabilityPolicy.BEST_EFFORT if best_effort else ReliabilityPolicy.RELIABLE,
+    if options.sensor_reliability == "best_effort":
+        return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=options.sensor_queue_depth,
+                          reliability=ReliabilityPolicy.BEST_EFFORT, durability=DurabilityPolicy.VOLATILE)
+    return QoSProfile(history=HistoryPolicy.KEEP_ALL, reliability=ReliabilityPolicy.RELIABLE,
                       durability=DurabilityPolicy.VOLATILE)
 
 

@@ -156,8 +156,8 @@ def test_racr_platform_and_vse_nodes_relocalize_the_camera(scene_dir: Path, star
     probe.node.create_subscription(PoseStamped, RACR_CAMERA_POSE_TOPIC, camera_poses.append, OUTPUT_QOS)
     platform = start(RacrPlatformSimNode, scene_path=str(scene_dir), time_scale=20.0, seed=3)
     start(RacrVseNode, scene_path=str(scene_dir), seed=4)
-    racr = start(RacrNode, reference_path=str(scene_dir / "reference"), reference_scene="S01", eta=3e-3,
-                 status_period_s=0.5)
+    racr = start(RacrNode, reference_path=str(scene_dir / "reference"), reference_scene="S01", status_period_s=0.5,
+                 **{"adjustment.eta": 3e-3})
     # racr_node never reads the simulator's truth
     assert SIM_CAMERA_POSE_TOPIC not in {s.topic_name for s in racr.subscriptions}
     level, message, values = probe.wait_status(lambda lv, m, v: v.get("stage") in ("converged", "failed",
@@ -165,7 +165,7 @@ def test_racr_platform_and_vse_nodes_relocalize_the_camera(scene_dir: Path, star
     assert values["stage"] == "converged" and level == Level.OK, (message, values)
     assert racr.session is not None and racr.session.scheme is not None and racr.session.scheme.running
     # the initialization motions first, exactly as planned, then adjustments; nothing after convergence
-    init = initialization_motions(racr.config.session_config())
+    init = initialization_motions(racr.config.session)
     got = [transform_stamped_to_matrix(m) for m in probe.motions]
     assert all(f == PLATFORM_HAND_FRAME and c == PLATFORM_HAND_GOAL_FRAME for _, _, f, c in got)
     assert len(got) == int(values["motions_issued"]) >= len(init) + 1
@@ -297,7 +297,7 @@ def test_pure_translation_initialization_fails_clearly(scene_dir: Path, start, m
 
 def test_zero_rotation_configuration_is_a_degenerate_initialization(scene_dir: Path, start, make_node,
                                                                     executor) -> None:
-    _, probe, _ = start_rig_run(scene_dir, start, make_node, executor, init_rotation_deg=0.0)
+    _, probe, _ = start_rig_run(scene_dir, start, make_node, executor, **{"session.init_rotation_deg": 0.0})
     level, message, _ = probe.wait_status(lambda lv, m, v: v.get("stage") == "initialization_failed")
     assert level == Level.ERROR and "rotate" in message
 
@@ -305,7 +305,7 @@ def test_zero_rotation_configuration_is_a_degenerate_initialization(scene_dir: P
 def test_a_platform_that_stops_answering(scene_dir: Path, start, make_node, executor) -> None:
     """The platform executes two motions, then never reports a stop again: stage platform_timeout (ERROR) after
     platform_timeout_s, no further motion, the node keeps reporting."""
-    _, probe, rig = start_rig_run(scene_dir, start, make_node, executor, answer=2, platform_timeout_s=0.5)
+    _, probe, rig = start_rig_run(scene_dir, start, make_node, executor, answer=2, **{"scheme.platform_timeout_s": 0.5})
     level, message, _ = probe.wait_status(lambda lv, m, v: v.get("stage") == "platform_timeout", 10.0)
     assert level == Level.ERROR and "has not reported a stop" in message and "motion 3 of 4" in message
     assert len(probe.motions) == 3 and rig.answered == 2

@@ -285,7 +285,7 @@ def test_teach_finish_then_repeat_localizes_near_the_truth(vtr, tmp_path: Path) 
     assert node.stats["bad_inputs"] == 0
 
     # a second node instance repeats the route under the changed illuminant
-    node, probe = vtr(mode="repeat", map_path=str(map_path), repeat_mode="fused")
+    node, probe = vtr(mode="repeat", map_path=str(map_path), **{"repeat.mode": "fused"})
     probe.wait_status(lambda lvl, msg, v: msg.startswith(f"map loaded: {len(taught)} keyframes"))
     probe.send_infos()
     errors = []
@@ -345,7 +345,7 @@ def test_teach_finish_then_repeat_localizes_near_the_truth(vtr, tmp_path: Path) 
     # legacy greyscale cannot match the changed illuminant: it never localizes near the truth. (Its whole-map search
     # may accept a wrong consensus of a few inliers in this repetitive corridor: 9 of 96 matches, 2.7 m off, found
     # by the PROSAC-ordered hypotheses.) A frame without a localization is reported as such.
-    node, probe = vtr(mode="repeat", map_path=str(map_path), repeat_mode="grey")
+    node, probe = vtr(mode="repeat", map_path=str(map_path), **{"repeat.mode": "grey"})
     probe.send_infos()
     probe.send_pair(r.repeat_stamps[0] - STEP_NS, fog, fog)
     level, message, values = probe.frame_status(r.repeat_stamps[0] - STEP_NS)
@@ -475,5 +475,5 @@ def test_bad_configuration_is_refused_at_start(ros_context, small_map: TeachMap,
     with pytest.raises(ConfigError, match="empty directory"):
         make(mode="teach", map_path=str(tmp_path / "empty"))
     with pytest.raises(ConfigError, match="grey"):
-        make(mode="teach", map_path=str(tmp_path / "new"), teach_sources=["fv", "fr"])
+        make(mode="teach", map_path=str(tmp_path / "new"), **{"teach.sources": ["fv", "fr"]})
     assert (tmp_path / "notes" / "todo.txt").read_text() == "mine"

@@ -17,6 +17,7 @@ from lightfast.config import (
     replace_config,
 )
 from lightfast.io import write_text_atomic
+from lightfast.nodes import NODE_CONFIGS, node_config_class
 
 
 @dataclass(frozen=True)
@@ -151,3 +152,13 @@ def test_a_section_is_a_nested_mapping_in_the_yaml(tmp_path: Path) -> None:
     path = tmp_path / "demo.yaml"
     path.write_text(text.replace("size: 20", "size: 7"))
     assert load_config_yaml(OuterConfig, path) == OuterConfig(inner=InnerConfig(size=7))
+
+
+@pytest.mark.parametrize("node", sorted(NODE_CONFIGS))
+def test_a_node_configuration_keeps_the_core_defaults(node: str) -> None:
+    """A node's sections default to their component's own defaults: a node runs the core as the core is tested
+    (the copies of fields this replaced had their defaults repeated as literals, and nothing pinned them)."""
+    cls = node_config_class(node)
+    for spec in field_specs(cls):
+        if spec.is_section:
+            assert spec.default == spec.scalar_type(), f"{node}: section {spec.name} does not keep the defaults"
