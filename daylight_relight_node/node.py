@@ -260,7 +260,7 @@ class DaylightRelightNode(LightfastNode[RelightConfig]):
         now = self.now_ns()
         ahead_ns = round(self.params.config.max_sun_epoch_ahead_s * 1e9)
         if ahead_ns > 0 and now > 0 and epoch - now > ahead_ns:
-            why = (f"stamped {(epoch - now) * 1e-9:.1f} s ahead of this node's clock (max_sun_epoch_ahead_s "
+            why: str | None = (f"stamped {(epoch - now) * 1e-9:.1f} s ahead of this node's clock (max_sun_epoch_ahead_s "
                    f"{self.params.config.max_sun_epoch_ahead_s:g})")
         else:
             why = self.assembler.drop_reason(epoch)
@@ -334,6 +334,7 @@ class DaylightRelightNode(LightfastNode[RelightConfig]):
             self.problem("stamp", f"frame {stamp}: {self._guard.describe(verdict, stamp, now)}", stamp_ns=stamp)
             return False
         if verdict is StampVerdict.JUMPED_BACK:
+            assert self._guard.last_ns is not None  # JUMPED_BACK: there is a previous stamp
             with self._lock:
                 self._time_jumped(f"frame stamps went back {(self._guard.last_ns - stamp) * 1e-9:.3f} s")
         if verdict is not StampVerdict.OUT_OF_ORDER:

@@ -26,7 +26,7 @@ import os
 import typing
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, ClassVar, TypeVar
 
 import yaml
 
@@ -176,6 +176,9 @@ class Config:
     Subclasses are ``@dataclass(frozen=True)`` with fields declared by :func:`param`; they may override
     :meth:`check` for rules that involve several fields (raise :class:`ConfigError`).
     """
+
+    if TYPE_CHECKING:  # every concrete subclass is a dataclass; tells the type checker so (no runtime attribute)
+        __dataclass_fields__: ClassVar[dict[str, dataclasses.Field[Any]]]
 
     def __post_init__(self) -> None:
         name = type(self).__name__

@@ -35,6 +35,7 @@ from typing import Any
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, TransformStamped
 from rclpy.node import Node
+from rclpy.timer import Timer
 
 from lightfast.config import ConfigError
 from lightfast.ros.convert import matrix_to_pose_stamped
@@ -76,7 +77,7 @@ class RacrPlatformSimNode(Node):
         self.commands = 0
         self.bad_commands = 0  # not even a rigid transform in platform_hand
         self._truth_stamp_ns = self._now_ns()
-        self._stop_timer = None
+        self._stop_timer: Timer | None = None
         self.pose_pub = self.create_publisher(PoseStamped, PLATFORM_POSE_TOPIC, OUTPUT_QOS)
         self.stopped_pub = self.create_publisher(PoseStamped, PLATFORM_STOPPED_TOPIC, OUTPUT_QOS)
         self.status_pub = self.create_publisher(DiagnosticArray, PLATFORM_STATUS_TOPIC, OUTPUT_QOS)

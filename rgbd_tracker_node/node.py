@@ -314,6 +314,7 @@ class RGBDTrackerNode(LightfastNode[TrackerConfig]):
                 self._guard.accept(job.stamp_ns)
         if job is not None:
             job.run()  # the alignment, outside the lock: f2m jobs start and finish meanwhile
+            assert frame is not None  # a job is started for a frame
             with self._state:
                 self._finish_track(job, frame)
         return more
@@ -355,6 +356,7 @@ class RGBDTrackerNode(LightfastNode[TrackerConfig]):
         now = self.get_clock().now().nanoseconds
         verdict = self._guard.check(stamp, now)
         if verdict is StampVerdict.JUMPED_BACK:
+            assert self._guard.last_ns is not None  # JUMPED_BACK: there is a previous stamp
             self._time_jumped(f"frame stamps went back {(self._guard.last_ns - stamp) * 1e-9:.3f} s")
         elif verdict is not StampVerdict.OK:
             self._problem("stamp", f"frame {stamp}: {self._guard.describe(verdict, stamp, now)}", stamp_ns=stamp)

@@ -59,6 +59,7 @@ service and the heartbeat share, so nothing touches a pipeline concurrently.
 """
 from __future__ import annotations
 
+import functools
 import math
 import sys
 import threading
@@ -213,9 +214,9 @@ class VtrLocalizerNode(LightfastNode[VtrLocalizerConfig]):
         self.tf = TransformBroadcaster(self) if cfg.publish_tf else None
         sensor = sensor_qos(cfg)
         for side, (image_topic, info_topic) in _SIDES.items():
-            self.create_subscription(Image, image_topic, lambda m, s=side: self._on_image(m, s), sensor,
+            self.create_subscription(Image, image_topic, functools.partial(self._on_image, side=side), sensor,
                                      callback_group=inputs)
-            self.create_subscription(CameraInfo, info_topic, lambda m, s=side: self._on_info(m, s), sensor,
+            self.create_subscription(CameraInfo, info_topic, functools.partial(self._on_info, side=side), sensor,
                                      callback_group=inputs)
         self._jump_handle = on_time_jump_back(self, cfg.time_jump_back_s, self._on_clock_jump)
         self.work_trigger = self.create_guard_condition(self._work, callback_group=work)
@@ -346,6 +347,7 @@ class VtrLocalizerNode(LightfastNode[VtrLocalizerConfig]):
         now = self.get_clock().now().nanoseconds
         verdict = self._guard.check(f.stamp_ns, now)
         if verdict is StampVerdict.JUMPED_BACK and self.teach is None:
+            assert self._guard.last_ns is not None  # JUMPED_BACK: there is a previous stamp
             self._time_jumped(f"stereo pair stamps went back {(self._guard.last_ns - f.stamp_ns) * 1e-9:.3f} s")
         elif verdict is StampVerdict.JUMPED_BACK:
             self._problem("stamp", f"stereo pair {f.stamp_ns} ignored: the stamps went back during a teach (a bag "

@@ -31,7 +31,7 @@ import itertools
 import operator
 from collections.abc import Iterable, Mapping
 from types import MappingProxyType
-from typing import Any, NamedTuple
+from typing import Any, Literal, NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -305,7 +305,7 @@ class PointFieldSpec(NamedTuple):
     name: str
     offset: int
     datatype: int
-    count: int = 1
+    count: int = 1  # type: ignore[assignment]  # the PointField name; shadows tuple.count on purpose
 
 
 class PointCloud2Fields(NamedTuple):
@@ -326,7 +326,7 @@ def _cloud_dtype(fields: Iterable[Any], point_step: int, *, bigendian: bool) -> 
     """The structured dtype of ``PointField`` s (duck-typed) with ``itemsize == point_step``, validated."""
     if point_step <= 0:
         raise PointCloudConversionError(f"PointCloud2.point_step={point_step} must be > 0")
-    order = ">" if bigendian else "<"
+    order: Literal[">", "<"] = ">" if bigendian else "<"
     names: list[str] = []
     formats: list[Any] = []
     offsets: list[int] = []
@@ -370,12 +370,13 @@ def _cloud_dtype(fields: Iterable[Any], point_step: int, *, bigendian: bool) -> 
 
 def _native(dtype: np.dtype) -> np.dtype:
     names = list(dtype.names or ())
+    fields = dtype.fields or {}  # None only for a dtype without names, and then the loops are empty
     formats = []
     for name in names:
-        fdt = dtype.fields[name][0]
+        fdt = fields[name][0]
         base = fdt.base.newbyteorder("=")
         formats.append(base if not fdt.shape else (base, fdt.shape))
-    offsets = [dtype.fields[name][1] for name in names]
+    offsets = [fields[name][1] for name in names]
     return np.dtype({"names": names, "formats": formats, "offsets": offsets, "itemsize": dtype.itemsize})
 
 
@@ -415,6 +416,7 @@ def pointcloud2_to_numpy(msg: Any) -> NDArray[np.void]:
     else:
         out = np.ndarray((height, width), dtype=dtype, buffer=buf, strides=(row_step, point_step)).reshape(-1)
     # dtype.isnative is not enough: NumPy reports subarray fields of the other byte order as native.
+    assert dtype.fields is not None and dtype.names is not None  # _cloud_dtype builds a structured dtype
     if any(not dtype.fields[name][0].base.isnative for name in dtype.names):
         out = out.astype(native)
     return out
@@ -446,8 +448,10 @@ def pointcloud2_fields(
     specs: list[PointFieldSpec] = []
     formats: list[Any] = []
     offsets: list[int] = []
+    fields = a.dtype.fields
+    assert fields is not None  # a dtype with names has fields
     for name in names:
-        fdt, offset = a.dtype.fields[name][:2]
+        fdt, offset = fields[name][:2]
         base = fdt.base
         datatype = _DTYPE_POINTFIELDS.get(base.newbyteorder("=")) if base.fields is None else None
         if datatype is None or len(fdt.shape) > 1:
@@ -465,8 +469,10 @@ def pointcloud2_fields(
     )
     flat = np.ascontiguousarray(a.reshape(-1), dtype=little_dtype)
     if is_dense is None:
+        little_fields = little_dtype.fields
+        assert little_fields is not None  # built from names above
         is_dense = all(
-            bool(np.isfinite(flat[name]).all()) for name in names if little_dtype.fields[name][0].base.kind == "f"
+            bool(np.isfinite(flat[name]).all()) for name in names if little_fields[name][0].base.kind == "f"
         )
     width = a.size // height
     point_step = a.dtype.itemsize

@@ -128,7 +128,7 @@ class RclpyTypes:
 
     def uint8_array(self, a: ArrayLike | BytesLike) -> array.array:
         out = array.array("B")
-        out.frombytes(memoryview(_uint8_1d(a)))  # one memcpy
+        out.frombytes(_uint8_1d(a).data)  # one memcpy (ndarray.data: the memoryview of the array)
         return out
 
     def float64_array(self, a: ArrayLike) -> NDArray[np.float64]:
@@ -136,7 +136,7 @@ class RclpyTypes:
 
     def float64_sequence(self, a: ArrayLike) -> array.array:
         out = array.array("d")
-        out.frombytes(memoryview(_float64_1d(a)).cast("B"))
+        out.frombytes(_float64_1d(a).data.cast("B"))
         return out
 
 

@@ -56,12 +56,12 @@ def _descriptor(spec: FieldSpec, read_only: bool = False) -> ParameterDescriptor
     desc = ParameterDescriptor(description=spec.describe(), read_only=spec.read_only or read_only)
     if spec.choices is not None:
         desc.additional_constraints = "one of: " + ", ".join(map(str, spec.choices))
-    has_bounds = spec.min is not None and spec.max is not None
-    if has_bounds and spec.scalar_type is float and not spec.is_tuple:
-        desc.floating_point_range = [FloatingPointRange(from_value=float(spec.min), to_value=float(spec.max))]
-    elif has_bounds and spec.scalar_type is int and not spec.is_tuple:
-        desc.integer_range = [IntegerRange(from_value=int(spec.min), to_value=int(spec.max), step=0)]
-    elif spec.min is not None or spec.max is not None:
+    lo, hi = spec.min, spec.max
+    if lo is not None and hi is not None and spec.scalar_type is float and not spec.is_tuple:
+        desc.floating_point_range = [FloatingPointRange(from_value=float(lo), to_value=float(hi))]
+    elif lo is not None and hi is not None and spec.scalar_type is int and not spec.is_tuple:
+        desc.integer_range = [IntegerRange(from_value=int(lo), to_value=int(hi), step=0)]
+    elif lo is not None or hi is not None:
         desc.additional_constraints = (desc.additional_constraints + "; " if desc.additional_constraints else "") + (
             f"range [{spec.min}, {spec.max}]"
         )

@@ -80,8 +80,9 @@ def vse_cloud_to_arrays(msg: Any) -> tuple[NDArray[np.float64], NDArray[np.float
     missing = [n for n in ("x", "y", "z") if n not in names]
     if missing:
         raise PointCloudConversionError(f"PointCloud2 has no field(s) {missing} (fields: {list(names)})")
+    fields = cloud.dtype.fields or {}  # None only without names, and then x is missing above
     for n in ("x", "y", "z", "intensity"):
-        if n in names and cloud.dtype.fields[n][0].shape:
+        if n in names and fields[n][0].shape:
             raise PointCloudConversionError(f"PointCloud2 field {n!r} must have count 1")
     xyz = np.stack([cloud[n].astype(np.float64) for n in ("x", "y", "z")], axis=1).reshape(-1, 3)
     inten = cloud["intensity"].astype(np.float64) if "intensity" in names else None

@@ -54,7 +54,11 @@ def wait_ready(node: Node, executor: Executor, names: Iterable[str], *, timeout_
     seen: set[str] = set()
     # a deep reader history: the announcements of all nodes arrive at once, and a depth of 1 kept only the last
     qos = QoSProfile(depth=256, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
-    sub = node.create_subscription(String, READY_TOPIC, lambda msg: seen.add(msg.data), qos)
+
+    def on_ready(msg: String) -> None:
+        seen.add(msg.data)
+
+    sub = node.create_subscription(String, READY_TOPIC, on_ready, qos)
     deadline = time.monotonic() + timeout_s
     try:
         while not wanted <= seen:

@@ -321,9 +321,9 @@ def describe_profile(path: Path) -> str:
     user = child(rtps, "userTransports") if rtps is not None else None
     use_builtin = child(rtps, "useBuiltinTransports") if rtps is not None else None
     parts = []
-    for tid in ([] if user is None else [c.text.strip() for c in user if c.text]):
-        desc = descriptors.get(tid)
-        parts.append(_describe_descriptor(desc, child, local) if desc is not None else f"{tid} (undefined)")
+    for transport_id in ([] if user is None else [c.text.strip() for c in user if c.text]):
+        desc = descriptors.get(transport_id)
+        parts.append(_describe_descriptor(desc, child, local) if desc is not None else f"{transport_id} (undefined)")
     if use_builtin is None or (use_builtin.text or "").strip().lower() != "false":
         parts.append("built-in shared memory 512 KB + UDPv4 on all interfaces")
     return " + ".join(parts) if parts else "no transport"

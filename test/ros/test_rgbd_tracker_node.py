@@ -150,6 +150,7 @@ def test_missing_reference_gives_the_f2f_pose_and_says_so(start_nodes, scene: Sc
         assert dt < 0.005 and dr < 0.3, (i, dt, dr)
         if i:
             assert float(values["f2f_inlier_ratio"]) > 0.5 and float(values["f2f_ms"]) > 0
+        assert probe.spin_until(lambda i=i: stamp(i) in probe.got["odom"])  # published with the pose, received apart
         odom = probe.got["odom"][stamp(i)]
         T, _, frame_id, child = odometry_to_matrix(odom)
         assert (frame_id, child) == ("map", OPTICAL_FRAME)
@@ -358,6 +359,7 @@ def test_initialpose_from_rviz_resets_and_the_pose_goes_out_on_tf(start_nodes, m
     assert tf.header.stamp == probe.got["pose"][stamp(1)].header.stamp
     t = tf.transform.translation
     np.testing.assert_allclose([t.x, t.y, t.z], pose_of(probe.got["pose"][stamp(1)])[:3, 3], atol=1e-9)
+    assert probe.spin_until(lambda: stamp(1) in probe.got["odom"])  # published with the pose, received apart
     assert probe.got["odom"][stamp(1)].child_frame_id == "tracked_camera"
 
 
