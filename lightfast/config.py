@@ -325,6 +325,34 @@ def _yaml_fields(config: Config, *, indent: str) -> list[str]:
     return lines
 
 
+def config_markdown(cls: type[Config]) -> str:
+    """A markdown table of every parameter of ``cls`` (sections as dotted names): name, type, default, valid
+    values, whether it can change at run time, description."""
+    rows = ["| parameter | type | default | valid values | at run time | description |", "|---|---|---|---|---|---|"]
+
+    def walk(config: Config, prefix: str, read_only: bool) -> None:
+        for spec in field_specs(config):
+            value = getattr(config, spec.name)
+            if spec.is_section:
+                walk(value, f"{prefix}{spec.name}.", read_only or spec.read_only)
+                continue
+            kind = f"{spec.scalar_type.__name__}[]" if spec.is_tuple else spec.scalar_type.__name__
+            valid = []
+            if spec.choices is not None:
+                valid.append(", ".join(map(str, spec.choices)))
+            if spec.min is not None or spec.max is not None:
+                lo = "-inf" if spec.min is None else f"{spec.min:g}"
+                hi = "inf" if spec.max is None else f"{spec.max:g}"
+                valid.append(f"[{lo}, {hi}]")
+            default = _yaml_scalar(list(value) if spec.is_tuple else value)
+            fixed = "read-only" if read_only or spec.read_only else "yes"
+            text = spec.description.replace("|", "\\|")
+            rows.append(f"| `{prefix}{spec.name}` | {kind} | `{default}` | {'; '.join(valid)} | {fixed} | {text} |")
+
+    walk(cls(), "", False)
+    return "\n".join(rows) + "\n"
+
+
 def load_config_yaml(cls: type[C], path: str | os.PathLike[str], *, node_name: str | None = None) -> C:
     """Load a ROS parameter file (``/**`` or ``<node_name>`` section, ``ros__parameters``) into ``cls``."""
     path = Path(path)

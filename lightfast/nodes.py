@@ -8,7 +8,7 @@ from __future__ import annotations
 import importlib
 from pathlib import Path
 
-from lightfast.config import Config, config_yaml
+from lightfast.config import Config, config_markdown, config_yaml
 from lightfast.io import write_text_atomic
 
 NODE_CONFIGS: dict[str, str] = {
@@ -27,12 +27,27 @@ def node_config_class(node_name: str) -> type[Config]:
     return getattr(importlib.import_module(module), cls)
 
 
-def write_node_configs(directory: Path, *, check: bool = False) -> list[Path]:
-    """Write (or with ``check`` only compare) every node's YAML; returns the files that were out of date."""
-    stale = []
+def parameters_markdown() -> str:
+    """``docs/parameters.md``: every node's parameters, generated from the configuration dataclasses."""
+    parts = ["# Node parameters", "",
+             "Generated from the nodes' configuration dataclasses by `lightfast config write` (like `config/*.yaml`);",
+             "edit the dataclasses, not this file. A section's fields are dotted parameters (`-p repeat.mode:=grey`).",
+             ""]
     for node in sorted(NODE_CONFIGS):
-        path = directory / f"{node}.yaml"
-        text = config_yaml(node_config_class(node), node_name=node)
+        cls = node_config_class(node)
+        parts += [f"## `{node}`", "", f"From `{cls.__module__}.{cls.__qualname__}`.", "", config_markdown(cls)]
+    return "\n".join(parts)
+
+
+def write_node_configs(directory: Path, *, docs_path: Path | None = None, check: bool = False) -> list[Path]:
+    """Write (or with ``check`` only compare) every node's YAML in ``directory`` and, with ``docs_path``, the
+    parameter reference; returns the files that were out of date."""
+    files = {directory / f"{node}.yaml": config_yaml(node_config_class(node), node_name=node)
+             for node in sorted(NODE_CONFIGS)}
+    if docs_path is not None:
+        files[docs_path] = parameters_markdown()
+    stale = []
+    for path, text in files.items():
         if not path.exists() or path.read_text() != text:
             stale.append(path)
             if not check:

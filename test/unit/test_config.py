@@ -99,13 +99,15 @@ def test_fields_need_param() -> None:
 
 
 def test_committed_node_parameter_files_are_current() -> None:
-    """config/<node>.yaml is generated from the config dataclasses (`lightfast config write`)."""
+    """config/<node>.yaml and docs/parameters.md are generated from the config dataclasses (`lightfast config
+    write`)."""
     from pathlib import Path
 
     from lightfast.nodes import NODE_CONFIGS, write_node_configs
 
-    config_dir = Path(__file__).resolve().parents[2] / "config"
-    assert write_node_configs(config_dir, check=True) == []
+    root = Path(__file__).resolve().parents[2]
+    config_dir = root / "config"
+    assert write_node_configs(config_dir, docs_path=root / "docs" / "parameters.md", check=True) == []
     assert sorted(p.stem for p in config_dir.glob("*.yaml")) == sorted(NODE_CONFIGS)
 
 
