@@ -184,12 +184,7 @@ class RacrNode(Node):
     def _on_clock_jump(self, now_ns: int, jump_ns: int) -> None:
         """ROS time went back (a restarted simulation, a bag played again): the session's motions and waits are
         timed on the old time line, so the relocalization starts over with a new session (executor thread)."""
-        session, self.session = self.session, None
-        if session is not None:
-            try:
-                session.stop()
-            except RacrError as exc:
-                self.get_logger().error(f"rACR alignment thread: {exc}")
+        self._stop_session()
         self._poses.clear()
         self._kf_images.clear()
         self._kf_poses.clear()
@@ -501,13 +496,16 @@ class RacrNode(Node):
         return values
 
     # ---------------------------------------------------------------------------------------------- shutdown
-    def destroy_node(self) -> None:
+    def _stop_session(self) -> None:
         session, self.session = self.session, None
         if session is not None:
             try:
                 session.stop()
             except RacrError as exc:
                 self.get_logger().error(f"rACR alignment thread: {exc}")
+
+    def destroy_node(self) -> None:
+        self._stop_session()
         super().destroy_node()
 
 
