@@ -259,8 +259,9 @@ class DaylightRelightNode(LightfastNode[RelightConfig]):
         one in use; one log line per dropped epoch."""
         now = self.now_ns()
         ahead_ns = round(self.params.config.max_sun_epoch_ahead_s * 1e9)
+        why: str | None
         if ahead_ns > 0 and now > 0 and epoch - now > ahead_ns:
-            why: str | None = (f"stamped {(epoch - now) * 1e-9:.1f} s ahead of this node's clock (max_sun_epoch_ahead_s "
+            why = (f"stamped {(epoch - now) * 1e-9:.1f} s ahead of this node's clock (max_sun_epoch_ahead_s "
                    f"{self.params.config.max_sun_epoch_ahead_s:g})")
         else:
             why = self.assembler.drop_reason(epoch)

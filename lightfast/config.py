@@ -30,7 +30,7 @@ from typing import TYPE_CHECKING, Any, ClassVar, TypeVar
 
 import yaml
 
-from lightfast.errors import ConfigError
+from lightfast.errors import ConfigError as ConfigError  # re-exported: lightfast.config.ConfigError
 
 C = TypeVar("C", bound="Config")
 SCALAR_TYPES = (bool, int, float, str)

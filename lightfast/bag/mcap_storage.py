@@ -63,7 +63,9 @@ class McapStorage:
         )
 
     def write(self, connection: Connection, timestamp: int, data: bytes | memoryview) -> None:
-        self._mcap.add_message(self._channels[connection.id], log_time=timestamp, data=data, publish_time=timestamp)
+        # mcap annotates data as bytes but only takes its len() and writes it: a memoryview is written without a copy
+        self._mcap.add_message(self._channels[connection.id], log_time=timestamp,
+                               data=data, publish_time=timestamp)  # type: ignore[arg-type]
 
     def close(self, version: int, metadata: str) -> None:
         """Finish the last chunk, add rosbag2's metadata record, write the summary and footer."""

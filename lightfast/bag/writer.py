@@ -15,7 +15,7 @@ import tempfile
 from collections.abc import Sequence
 from pathlib import Path
 from types import TracebackType
-from typing import Any
+from typing import Any, Final
 
 from rosbags.interfaces import Connection, Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
 from rosbags.rosbag2 import StoragePlugin, Writer
@@ -26,7 +26,7 @@ from rosbags.typesys.store import Typestore
 from lightfast.bag.errors import BagError, BagExistsError, UnknownMessageTypeError
 from lightfast.bag.mcap_storage import COMPRESSIONS, McapStorage
 
-ROSBAG2_VERSION = 9  # the metadata version of ROS 2 Jazzy's rosbag2
+ROSBAG2_VERSION: Final = 9  # the metadata version of ROS 2 Jazzy's rosbag2
 STORAGES = {"mcap": StoragePlugin.MCAP, "sqlite3": StoragePlugin.SQLITE3}
 
 
@@ -90,9 +90,10 @@ class BagWriter:
         if storage == "mcap":
             # rosbags' Writer keeps its front end (connections, QoS, metadata.yaml); the MCAP file comes from
             # McapStorage (chunk CRCs, chunk compression). The plugin table is looked up per instance at open().
-            self._writer.STORAGE_PLUGINS = {  # type: ignore[assignment]
+            self._writer.STORAGE_PLUGINS = {
                 **Writer.STORAGE_PLUGINS,
-                StoragePlugin.MCAP: functools.partial(McapStorage, compression=compression),
+                # rosbags types the table as classes; it only calls the entry, so a factory works
+                StoragePlugin.MCAP: functools.partial(McapStorage, compression=compression),  # type: ignore[dict-item]
             }
         try:
             self._writer.open()
@@ -144,7 +145,7 @@ class BagWriter:
         conn = self._connections.get(topic)
         if conn is None:
             raise BagError(f"topic {topic} was not added to the bag")
-        data = self.typestore.serialize_cdr(message, conn.msgtype)
+        data: bytes | memoryview = self.typestore.serialize_cdr(message, conn.msgtype)
         if pad := -len(data) % 4:
             # Fast CDR (what rclpy and every live publisher use) pads a payload to a multiple of 4 bytes; doing the
             # same keeps a converted bag byte-identical to one recorded from live topics.

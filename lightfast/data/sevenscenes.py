@@ -29,6 +29,7 @@ import re
 from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any, cast
 
 import cv2
 import numpy as np
@@ -121,7 +122,8 @@ class SevenScenes:
         T = self._read_matrix(stem.with_name(stem.name + ".pose.txt"), (4, 4))
         # KinectFusion stored the rotations in single precision (|RᵀR - I| ~ 1e-4): snap to the nearest rotation
         T[:3, :3] = project_to_so3(T[:3, :3])
-        return SevenScenesFrame(index, cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB), depth, T)
+        rgb = cast(NDArray[np.uint8], cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB))
+        return SevenScenesFrame(index, rgb, cast(NDArray[np.uint16], depth), T)  # uint16: checked above
 
     def T_map_cam(self, frame: SevenScenesFrame) -> NDArray[np.float64]:
         return self.T_map_world @ frame.T_world_cam
@@ -160,10 +162,10 @@ def colour_offset(frames: Iterable[tuple[NDArray[np.uint8], NDArray[np.uint16]]]
     return shifts[int(np.argmax(score))]
 
 
-def shift_colour(image: NDArray[np.generic], offset: tuple[int, int]) -> NDArray[np.generic]:
+def shift_colour(image: NDArray[Any], offset: tuple[int, int]) -> NDArray[Any]:
     """``image`` moved by ``offset = (dx, dy)`` px (content at (u, v) goes to (u + dx, v + dy)); borders repeat."""
     h, w = image.shape[:2]
-    M = np.float32([[1, 0, offset[0]], [0, 1, offset[1]]])
+    M = np.array([[1, 0, offset[0]], [0, 1, offset[1]]], dtype=np.float32)
     return cv2.warpAffine(image, M, (w, h), flags=cv2.INTER_NEAREST, borderMode=cv2.BORDER_REPLICATE)
 
 
@@ -200,7 +202,7 @@ def convert_7scenes(
         for i, index in enumerate(track(indices, desc="7-Scenes to MCAP", enabled=progress, unit="frame")):
             frame = data.frame(index)
             t_ns = start_ns + round(i * 1e9 / rate_hz)
-            header = dict(stamp_ns=t_ns, frame_id=OPTICAL_FRAME, types=types)
+            header: dict[str, Any] = dict(stamp_ns=t_ns, frame_id=OPTICAL_FRAME, types=types)
             info = camera_info_from_camera(data.camera, **header)
             bag.write_message(COLOR_TOPIC, t_ns, numpy_to_image(frame.rgb, "rgb8", **header))
             bag.write_message(COLOR_INFO_TOPIC, t_ns, info)

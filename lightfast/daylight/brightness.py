@@ -36,7 +36,7 @@ from collections import deque
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from functools import lru_cache
-from typing import TYPE_CHECKING, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import numba
 import numpy as np
@@ -121,7 +121,7 @@ def _component_stack(components: Mapping[str, ArrayLike], rows: int, *, what: st
     names = tuple(components)
     arrays = []
     for name in names:
-        a = np.asarray(components[name], dtype=dtype)
+        a: NDArray[Any] = np.asarray(components[name], dtype=dtype)
         if a.shape != (rows, 3):
             raise BrightnessError(f"{what} {name!r} must have shape ({rows}, 3){like}, got {a.shape}")
         arrays.append(a)
@@ -338,7 +338,8 @@ def _fit_channel_crf(A: F64, y: F64, table: F64, slopes: F64, x0: F64, bounded: 
             cost_t = r_t @ r_t
             if cost_t < cost:
                 moved = np.sqrt(np.sum((trial - s) ** 2))
-                rel = (cost - cost_t) / max(cost, 1e-300)
+                # cost is r @ r of 1-D arrays: a scalar (typed as an array; numba-compiled, so no cast)
+                rel = (cost - cost_t) / max(cost, 1e-300)  # type: ignore[operator]
                 s, r, J, cost = trial, r_t, d_t[:, None] * A, cost_t
                 lam = max(lam / 10.0, 1e-12)
                 improved = True

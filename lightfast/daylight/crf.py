@@ -378,7 +378,7 @@ def calibrate_from_bracket(
     times = np.array([_positive(t, "exposure time") for t in exposures_s], dtype=np.float32)
     if len(np.unique(times)) < 2:
         raise CrfError("the bracket needs at least two different exposure times")
-    bgr = []
+    bgr: list[NDArray[Any]] = []
     for i, img in enumerate(images):
         a = np.asarray(img)
         if a.dtype != np.uint8:
@@ -388,6 +388,7 @@ def calibrate_from_bracket(
         if bgr and a.shape != bgr[0].shape:
             raise CrfError(f"image {i} has shape {a.shape}, image 0 has {bgr[0].shape}")
         bgr.append(np.ascontiguousarray(a[..., ::-1]))
+    calib: cv2.CalibrateCRF
     if method == "debevec":
         if samples < 2:
             raise CrfError(f"samples must be >= 2, got {samples}")

@@ -24,6 +24,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
@@ -115,7 +116,7 @@ class LightingMap:
         """Write the map directory atomically."""
         path = Path(path)
         p = self.patches
-        arrays = {
+        arrays: dict[str, NDArray[Any]] = {
             "face_patch": p.face_patch.astype(np.int32),
             "patch_area_m2": p.area_m2,
             "patch_centroid_m": p.centroid_m,
@@ -148,7 +149,7 @@ class LightingMap:
             with atomic_directory(path, overwrite=overwrite) as tmp:
                 save_ply(self.mesh, tmp / "mesh.ply")
                 with open(tmp / "lighting_map.npz", "wb") as fh:
-                    np.savez(fh, **arrays)
+                    np.savez(fh, allow_pickle=True, **arrays)  # the default, explicit: **arrays are arrays only
                 write_text_atomic(tmp / "metadata.json", json.dumps(meta, indent=2) + "\n")
         except FileExistsError as exc:
             raise LightingMapError(str(exc)) from None

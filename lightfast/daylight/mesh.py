@@ -15,6 +15,7 @@ import os
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
+from typing import cast
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -92,8 +93,10 @@ class ReflectanceMesh:
     @cached_property
     def vertex_areas_m2(self) -> NDArray[np.float64]:
         """A third of the area of every triangle a vertex belongs to."""
-        return np.bincount(self.faces.reshape(-1), weights=np.repeat(self.face_areas_m2 / 3.0, 3),
-                           minlength=self.num_vertices)
+        # bincount with weights sums float64 (NumPy's stubs type every bincount as integer)
+        return cast(NDArray[np.float64], np.bincount(self.faces.reshape(-1),
+                                                     weights=np.repeat(self.face_areas_m2 / 3.0, 3),
+                                                     minlength=self.num_vertices))
 
     @cached_property
     def vertex_normals(self) -> NDArray[np.float64]:

@@ -29,6 +29,7 @@ import os
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import cast
 
 import numpy as np
 import yaml
@@ -71,7 +72,8 @@ def openings_array(openings: Sequence[Opening] | ArrayLike | None) -> NDArray[np
     if openings is None:
         return np.zeros((0, 3, 3))
     if isinstance(openings, Sequence) and all(isinstance(o, Opening) for o in openings):
-        return np.stack([o.array for o in openings]) if len(openings) else np.zeros((0, 3, 3))
+        ops = cast(Sequence[Opening], openings)  # every item checked above
+        return np.stack([o.array for o in ops]) if len(ops) else np.zeros((0, 3, 3))
     arr = np.asarray(openings, dtype=np.float64).reshape(-1, 3, 3)
     for row in arr:
         Opening(tuple(row[0]), tuple(row[1]), tuple(row[2]))  # validates

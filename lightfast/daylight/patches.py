@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
 import scipy.sparse as sp
@@ -87,7 +88,7 @@ def build_patches(
     face_node = face_node.reshape(-1)
     if normal_merge_deg > 0.0:
         _, node_cell = np.unique(node_keys[:, 1:], axis=0, return_inverse=True)
-        node_area = np.bincount(face_node, weights=fa, minlength=len(node_keys))
+        node_area = cast(NDArray[np.float64], np.bincount(face_node, weights=fa, minlength=len(node_keys)))
         node_region = _merge_bins(node_cell.reshape(-1), directions[node_keys[:, 0]], node_area,
                                   math.cos(math.radians(normal_merge_deg)), min_area=0.1 * patch_size_m**2)
         _, face_patch = np.unique(node_region[face_node], return_inverse=True)
@@ -96,11 +97,14 @@ def build_patches(
     face_patch = face_patch.reshape(-1).astype(np.int64)
     n_patches = int(face_patch.max()) + 1
 
-    area = np.bincount(face_patch, weights=fa, minlength=n_patches)
+    # bincount with weights sums float64 (NumPy's stubs type every bincount as integer)
+    area = cast(NDArray[np.float64], np.bincount(face_patch, weights=fa, minlength=n_patches))
     safe_area = np.maximum(area, 1e-300)
-    centroid = np.stack([np.bincount(face_patch, weights=fa * fc[:, k], minlength=n_patches) for k in range(3)], 1)
+    centroid = cast(NDArray[np.float64], np.stack(
+        [np.bincount(face_patch, weights=fa * fc[:, k], minlength=n_patches) for k in range(3)], 1))
     centroid /= safe_area[:, None]
-    normal = np.stack([np.bincount(face_patch, weights=fa * fn[:, k], minlength=n_patches) for k in range(3)], 1)
+    normal = cast(NDArray[np.float64], np.stack(
+        [np.bincount(face_patch, weights=fa * fn[:, k], minlength=n_patches) for k in range(3)], 1))
     normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
     rho_f = mesh.face_reflectance
     reflectance = np.stack(

@@ -138,7 +138,9 @@ def _shade(triangle_id: NDArray[np.int64], uv: NDArray[np.float32], faces: NDArr
 _RESPONSE_BINS = 8192
 
 
-def _response_table(inverse: NDArray[np.float64], bins: int = _RESPONSE_BINS) -> tuple[NDArray[np.float64], ...]:
+def _response_table(
+    inverse: NDArray[np.float64], bins: int = _RESPONSE_BINS
+) -> tuple[NDArray[np.float64], NDArray[np.int16], NDArray[np.float64], NDArray[np.float64]]:
     """The rounded 8-bit camera response ``round(f(x))`` per channel as thresholds, for :func:`_apply_response`.
 
     ``f(x)`` rounds to at least k where ``x >= threshold[k]``, the exposure where the linear interpolation of the

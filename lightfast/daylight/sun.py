@@ -33,7 +33,7 @@ import zoneinfo
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeAlias
 
 import numpy as np
 import pandas as pd
@@ -54,7 +54,7 @@ __all__ = [
 ]
 
 #: What :func:`sun_position` accepts as time (see the module docstring).
-TimeLike = dt.datetime | pd.Timestamp | pd.DatetimeIndex | np.datetime64 | NDArray[Any] | int | Sequence[Any]
+TimeLike: TypeAlias = dt.datetime | pd.Timestamp | pd.DatetimeIndex | np.datetime64 | NDArray[Any] | int | Sequence[Any]
 
 #: SPA's approximate atmospheric refraction at sunrise/sunset (degrees); only decides when refraction applies.
 ATMOS_REFRACT_DEG = 0.5667

@@ -7,12 +7,16 @@ per light component (the method's brightness scales absorb any global factor).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from lightfast.daylight.lighting_map import LightingMap, LightingMapConfig, prepare_lighting_map
 from lightfast.daylight.mesh import ReflectanceMesh
+
+if TYPE_CHECKING:
+    from lightfast.sim.radiance_oracle import Component
 
 
 @dataclass(frozen=True)
@@ -87,8 +91,9 @@ def compare_with_radiance(mesh: ReflectanceMesh, *, points: int, seed: int, repe
     pts, nrm = sample_surface_points(mesh, points, seed=seed)
     if at_vertices:
         pts, nrm = snap_to_vertices(lmap, pts, nrm)
-    ours = {"sky": lmap.sky_radiosity, "ground": lmap.ground_radiosity, "sun": sun_radiosity(lmap, SUN_DIRECTION)}
-    out = {}
+    ours: dict[Component, NDArray[np.float32]] = {
+        "sky": lmap.sky_radiosity, "ground": lmap.ground_radiosity, "sun": sun_radiosity(lmap, SUN_DIRECTION)}
+    out: dict[str, Agreement] = {}
     for component, radiosity in ours.items():
         ref = radiance_irradiance(mesh, pts, nrm, component=component, repeats=repeats,
                                   sun_direction=SUN_DIRECTION if component == "sun" else None,

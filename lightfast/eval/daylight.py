@@ -33,6 +33,7 @@ import time
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -448,6 +449,12 @@ def _save_run(out_dir: Path, run: SequenceRun, key: str) -> None:
     write_text_atomic(path, json.dumps(doc) + "\n")
 
 
+def _frame_record(doc: dict[str, Any]) -> FrameRecord:
+    """A :class:`FrameRecord` from its JSON form (lists back to tuples)."""
+    fields: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v for k, v in doc.items()}
+    return FrameRecord(**fields)
+
+
 def _load_run(out_dir: Path, sequence: str, method: str, key: str) -> SequenceRun | None:
     """The stored run if it exists and has ``key``; None otherwise (also for a damaged file: it is redone)."""
     path = _run_path(out_dir, sequence, method)
@@ -455,8 +462,7 @@ def _load_run(out_dir: Path, sequence: str, method: str, key: str) -> SequenceRu
         doc = json.loads(path.read_text())
         if doc.get("key") != key:
             return None
-        frames = [FrameRecord(**{k: tuple(v) if isinstance(v, list) else v for k, v in f.items()})
-                  for f in doc["frames"]]
+        frames = [_frame_record(f) for f in doc["frames"]]
         return SequenceRun(sequence, method, frames, [np.array(T).reshape(4, 4) for T in doc["T_est"]],
                            [np.array(T).reshape(4, 4) for T in doc["T_gt"]])
     except FileNotFoundError:

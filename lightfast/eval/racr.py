@@ -688,7 +688,8 @@ def done_means(runs: Sequence[RunRecord]) -> dict[str, Any]:
     return {
         "racr_varied": {"scenes": racr_n, "success_rate": racr_rate, "afd_median_px": racr_median,
                         "goal": "success >= 0.95, median <= 1.5 px",
-                        "met": None if racr_rate is None else bool(racr_rate >= 0.95 and racr_median <= 1.5)},
+                        "met": None if racr_rate is None or racr_median is None
+                        else bool(racr_rate >= 0.95 and racr_median <= 1.5)},
         "acr_varied": {"scenes": acr_n, "success_rate": acr_rate, "afd_median_px": acr_median,
                        "goal": "fails in most scenes", "met": None if acr_rate is None else bool(acr_rate < 0.5)},
         "parallel_vs_serial": speed,

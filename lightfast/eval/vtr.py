@@ -407,7 +407,7 @@ def run_repeat(run: SimRun, tmap: TeachMap, teach_truth: Truth, mode: str, *,
                 sun_elevation_deg=float(truth.sun_elevation_deg[k]), localized=bool(res.localized),
                 failure=bool(res.failure), relocalized=bool(res.relocalized), searched_map=bool(res.searched_map),
                 keyframe=int(res.keyframe_index),
-                **{f"inliers_{s}": int(ins.get(s, 0)) for s in REPORTED_SOURCES},  # type: ignore[arg-type]
+                **{f"inliers_{s}": int(ins.get(s, 0)) for s in REPORTED_SOURCES},
                 **{f"matches_{s}": int(mat.get(s, 0)) for s in REPORTED_SOURCES},
                 vo_success=bool(res.vo_success), distance_on_vo_m=float(res.distance_on_vo_m), vo_truth_m=vo_truth,
                 error_m=err_m, error_deg=err_deg, ms_total=ms_total,

@@ -140,7 +140,7 @@ class _Features:
 
 
 def _sift(config: AcrConfig) -> cv2.SIFT:
-    return cv2.SIFT_create(nfeatures=config.max_features)
+    return cv2.SIFT.create(nfeatures=config.max_features)
 
 
 def _match(cur: _Features, ref: _Features, config: AcrConfig) -> tuple[Array, Array]:

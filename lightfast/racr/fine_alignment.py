@@ -95,6 +95,7 @@ import logging
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import cast
 
 import cv2
 import numpy as np
@@ -248,7 +249,7 @@ class Keyframe:
         if isinstance(value, Keyframe):
             return value
         try:
-            image, T, camera = value  # type: ignore[misc]
+            image, T, camera = value
         except (TypeError, ValueError):
             raise AlignmentError("a keyframe must be a Keyframe or an (image, T_cur_cam, camera) tuple") from None
         return cls(image, T, camera)  # type: ignore[arg-type]
@@ -327,7 +328,7 @@ class _Views:
         for kf in keyframes:
             img = kf.image
             if blur_px > 0.0:
-                img = cv2.GaussianBlur(img, (0, 0), blur_px, borderType=cv2.BORDER_REFLECT)
+                img = cast(Array, cv2.GaussianBlur(img, (0, 0), blur_px, borderType=cv2.BORDER_REFLECT))
             gy, gx = np.gradient(img)
             cols = [img, gx, gy]
             if squared_gradient:
@@ -541,7 +542,8 @@ class _Problem:
         if cols.stop > 6:
             J_g[:, 6] = sigma * np.einsum("ij,ij->i", (self.p_geo - self.pivot_cur) @ R.T, self.n)
         Jk = self._chain_params(c, s[..., 1:3] * ok[..., None], Rt, sigma, cols)
-        J_p = (Jk[pu, pm] - Jk[pv, pm]) * w[:, None] if cw > 0.0 else Jk[pu, pm] - Jk[pv, pm]
+        # cw > 0: w is an array
+        J_p = (Jk[pu, pm] - Jk[pv, pm]) * cast(Array, w)[:, None] if cw > 0.0 else Jk[pu, pm] - Jk[pv, pm]
         if cw > 0.0:  # ∂w/∂x = −½ w / (c² + G) · ∂G/∂x with G = ‖∇I_u‖² + ‖∇I_v‖²
             Jq = self._chain_params(c, s[..., 3:5] * ok[..., None], Rt, sigma, cols)
             dw = -0.5 * w**3 / (cw * cw)  # = −½ w / (c² + G)

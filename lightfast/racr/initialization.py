@@ -35,7 +35,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, cast
 
 import cv2
 import numpy as np
@@ -146,8 +146,8 @@ def _motions(M: ArrayLike, name: str) -> Array:
         raise InitializationError(f"{name}: the bottom row of every transform must be [0, 0, 0, 1]")
     ok = np.atleast_1d(is_rotation(a[:, :3, :3], atol=_RIGID_ATOL))
     if not np.all(ok):
-        bad = np.flatnonzero(~ok).tolist()
-        raise InitializationError(f"{name}: the rotation blocks of motions {bad} are not rotations")
+        bad_motions = np.flatnonzero(~ok).tolist()
+        raise InitializationError(f"{name}: the rotation blocks of motions {bad_motions} are not rotations")
     a[:, :3, :3] = project_to_so3(a[:, :3, :3])
     return a
 
@@ -253,12 +253,12 @@ def _opencv_rotation(M_A: Array, M_B: Array, method: str) -> Array:
     eye = np.eye(4)
     T_base_gripper = [eye, *M_B]
     T_target_cam = [eye, *[_rigid_inverse(M) for M in M_A]]  # camera k' in the world of camera 0, inverted
-    args: list[Any] = [
+    args: tuple[Any, Any, Any, Any] = (
         [T[:3, :3] for T in T_base_gripper],
         [T[:3, 3:4] for T in T_base_gripper],
         [T[:3, :3] for T in T_target_cam],
         [T[:3, 3:4] for T in T_target_cam],
-    ]
+    )
     try:
         R_hand_cam, _ = cv2.calibrateHandEye(*args, method=getattr(cv2, _CV_METHOD_NAMES[method]))
     except cv2.error as exc:
@@ -345,7 +345,7 @@ def hand_eye_translation(
             "least two different axes"
         )
     t_X, *_ = np.linalg.lstsq(A, rhs, rcond=None)
-    return t_X
+    return cast(Array, t_X)  # float64 in, float64 out
 
 
 def initialize(

@@ -370,7 +370,7 @@ def _cloud_dtype(fields: Iterable[Any], point_step: int, *, bigendian: bool) -> 
 
 def _native(dtype: np.dtype) -> np.dtype:
     names = list(dtype.names or ())
-    fields = dtype.fields or {}  # None only for a dtype without names, and then the loops are empty
+    fields: Mapping[str, Any] = dtype.fields or {}  # None only for a dtype without names: then no loop runs
     formats = []
     for name in names:
         fdt = fields[name][0]

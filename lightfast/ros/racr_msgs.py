@@ -12,6 +12,7 @@ here imports rclpy. Conventions (README, rACR topics):
 """
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -80,7 +81,7 @@ def vse_cloud_to_arrays(msg: Any) -> tuple[NDArray[np.float64], NDArray[np.float
     missing = [n for n in ("x", "y", "z") if n not in names]
     if missing:
         raise PointCloudConversionError(f"PointCloud2 has no field(s) {missing} (fields: {list(names)})")
-    fields = cloud.dtype.fields or {}  # None only without names, and then x is missing above
+    fields: Mapping[str, Any] = cloud.dtype.fields or {}  # None only without names: then x is missing above
     for n in ("x", "y", "z", "intensity"):
         if n in names and fields[n][0].shape:
             raise PointCloudConversionError(f"PointCloud2 field {n!r} must have count 1")

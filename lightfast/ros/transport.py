@@ -30,7 +30,7 @@ import os
 import re
 import tempfile
 import xml.etree.ElementTree as ET
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
 
 from lightfast.ros.errors import TransportError
@@ -329,11 +329,13 @@ def describe_profile(path: Path) -> str:
     return " + ".join(parts) if parts else "no transport"
 
 
-def _describe_descriptor(desc: ET.Element, child, local) -> str:
-    kind = (child(desc, "type").text or "").strip() if child(desc, "type") is not None else "?"
+def _describe_descriptor(desc: ET.Element, child: Callable[[ET.Element, str], ET.Element | None],
+                         local: Callable[[str], str]) -> str:
+    type_elem = child(desc, "type")
+    kind = (type_elem.text or "").strip() if type_elem is not None else "?"
     if kind == "SHM":
         size = child(desc, "segment_size")
-        n = int(size.text) if size is not None and (size.text or "").strip().isdigit() else 512 * 1024
+        n = int(size.text) if size is not None and size.text is not None and size.text.strip().isdigit() else 512 * 1024
         return f"shared memory {n // 2**20} MB" if n >= 2**20 else f"shared memory {n // 1024} KB"
     whitelist = child(desc, "interfaceWhiteList")
     allowed = [] if whitelist is None else [(c.text or "").strip() for c in whitelist if (c.text or "").strip()]

@@ -69,6 +69,7 @@ import time
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
+from typing import Any, cast
 
 import numpy as np
 import yaml
@@ -89,6 +90,7 @@ from lightfast.sim.gt_renderer import (
     CameraResponse,
     DepthSensor,
     GroundTruthRenderer,
+    IrradianceCache,
     frame_scales,
 )
 from lightfast.sim.map_reconstruction import ReconstructionSettings, reconstruct_map
@@ -98,6 +100,7 @@ from lightfast.sim.sky_model import (
     OVERCAST_SKY_RGB,
     SkyState,
     clear_sky_irradiance,
+    float3,
     luminance,
     sun_rgb,
 )
@@ -212,11 +215,13 @@ def sky_states(site: Site, times_ns: NDArray[np.int64], *, clouds: bool,
                rng: np.random.Generator) -> tuple[list[SkyState], list[dict[str, float]]]:
     """The outdoor light of every frame and a truth record per frame (see the module docstring)."""
     pos = sun_position(site, times_ns)
+    elevation_deg = cast(NDArray[np.float64], pos.elevation_deg)  # an array of times: arrays of angles
+    azimuth_deg = cast(NDArray[np.float64], pos.azimuth_deg)
     t_s = (times_ns - times_ns[0]) * 1e-9
     att = cloud_transmittance(t_s, rng) if clouds else np.ones(len(times_ns))
     states, rows = [], []
     for i, ns in enumerate(times_ns):
-        el = float(pos.elevation_deg[i])
+        el = float(elevation_deg[i])
         cs = clear_sky_irradiance(el, altitude_m=site.altitude_m)
         a = float(att[i])
         dni = cs.dni_wm2 * a
@@ -224,16 +229,16 @@ def sky_states(site: Site, times_ns: NDArray[np.int64], *, clouds: bool,
         dhi_over = 0.3 * (1.0 - a) * cs.dni_wm2 * max(0.0, math.sin(math.radians(el)))
         sun_col = sun_rgb(el)
         st = SkyState(
-            sun_direction=tuple(float(x) for x in pos.direction_map[i]),
-            sun_dni_rgb=tuple(float(x) for x in dni * sun_col),
-            clear_dhi_rgb=tuple(float(x) for x in dhi_clear * CLEAR_SKY_RGB),
-            overcast_dhi_rgb=tuple(float(x) for x in dhi_over * OVERCAST_SKY_RGB),
+            sun_direction=float3(pos.direction_map[i]),
+            sun_dni_rgb=float3(dni * sun_col),
+            clear_dhi_rgb=float3(dhi_clear * CLEAR_SKY_RGB),
+            overcast_dhi_rgb=float3(dhi_over * OVERCAST_SKY_RGB),
         )
         states.append(st)
         sc = frame_scales(st)
         row: dict[str, float] = {
             "frame": i, "stamp_ns": int(ns),
-            "sun_azimuth_deg": float(pos.azimuth_deg[i]), "sun_elevation_deg": el,
+            "sun_azimuth_deg": float(azimuth_deg[i]), "sun_elevation_deg": el,
             "sun_dir_x": st.sun_direction[0], "sun_dir_y": st.sun_direction[1], "sun_dir_z": st.sun_direction[2],
             "cloud_transmittance": a, "dni_wm2": dni, "dhi_clear_wm2": dhi_clear, "dhi_overcast_wm2": dhi_over,
             "ghi_wm2": float(luminance(st.ghi_rgb)),
@@ -440,7 +445,7 @@ def _complete(seq_dir: Path, digest: str) -> bool:
 # generation
 
 
-def _auto_exposure(renderer: GroundTruthRenderer, cache: object, states: list[SkyState],
+def _auto_exposure(renderer: GroundTruthRenderer, cache: IrradianceCache, states: list[SkyState],
                    poses: NDArray[np.float64], base: CameraResponse, *, target_x: float = 0.18,
                    max_exposure_s: float = 0.03) -> CameraResponse:
     """Fixed exposure for the sequence: the median luminance of 8 low-resolution probe renders maps to
@@ -516,7 +521,7 @@ def _generate_sequence(spec: SequenceSpec, scene: DaylightScene, renderer: Groun
             sat.append(float(np.mean(rgb == 255)))
             valid.append(float(np.mean(depth_mm > 0)))
             t_ns = int(times_ns[i])
-            header = dict(stamp_ns=t_ns, frame_id=OPTICAL_FRAME, types=types)
+            header: dict[str, Any] = dict(stamp_ns=t_ns, frame_id=OPTICAL_FRAME, types=types)
             info = camera_info_from_camera(camera, **header)
             bag.write_message(COLOR_TOPIC, t_ns, numpy_to_image(rgb, "rgb8", **header))
             bag.write_message(COLOR_INFO_TOPIC, t_ns, info)
@@ -656,7 +661,7 @@ def generate_daylight_set(
             skipped_scenes.setdefault(spec.scene, res)
             continue
         if spec.scene not in scenes:
-            kw = {"resolution_m": res}
+            kw: dict[str, Any] = {"resolution_m": res}
             if site is not None:
                 kw["site"] = site
             scene = make_scene(spec.scene, **kw)

@@ -31,9 +31,10 @@ import itertools
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import cast
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from lightfast.daylight.mesh import ReflectanceMesh, merge_meshes
 from lightfast.daylight.openings import Opening
@@ -169,7 +170,7 @@ def fbm(u: NDArray[np.float64], v: NDArray[np.float64], seed: int, octaves: int 
     return total / norm
 
 
-def _rgb(c: Sequence[float], n: int) -> NDArray[np.float64]:
+def _rgb(c: ArrayLike, n: int) -> NDArray[np.float64]:
     return np.broadcast_to(np.asarray(c, dtype=np.float64), (n, 3)).copy()
 
 
@@ -346,8 +347,8 @@ def _grid(origin: Sequence[float], eu: Sequence[float], ev: Sequence[float], us:
     U, V = np.meshgrid(us, vs, indexing="ij")
     verts = o + U.reshape(-1, 1) * eu_a + V.reshape(-1, 1) * ev_a
     nu, nv = len(us), len(vs)
-    i, j = np.meshgrid(np.arange(nu - 1), np.arange(nv - 1), indexing="ij")
-    i, j = i.ravel(), j.ravel()
+    i_grid, j_grid = np.meshgrid(np.arange(nu - 1), np.arange(nv - 1), indexing="ij")
+    i, j = i_grid.ravel(), j_grid.ravel()
     if hole is not None:
         keep = ~hole(0.5 * (us[i] + us[i + 1]), 0.5 * (vs[j] + vs[j + 1]))
         i, j = i[keep], j[keep]
@@ -516,7 +517,8 @@ def make_ds1(*, resolution_m: float = 0.02, site: Site = FREIBURG, seed: int = 1
                 step: float = r, bottom: bool = True, yaw: float = 0.0, obstacle: bool = True) -> None:
         parts.extend(_box(lo, size, step, tex, bottom=bottom, yaw_deg=yaw))
         if obstacle:
-            obstacles.append(Box(tuple(lo), tuple(np.add(lo, size))))
+            obstacles.append(Box(cast(tuple[float, float, float], tuple(lo)),
+                                 cast(tuple[float, float, float], tuple(np.add(lo, size)))))
 
     # radiator under the window
     parts.extend(_radiator(r, win.x0 + 0.1, win.x1 - win.x0 - 0.2, plain=False))

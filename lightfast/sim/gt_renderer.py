@@ -102,7 +102,7 @@ from lightfast.daylight.mesh import ReflectanceMesh
 from lightfast.progress import track
 from lightfast.raycast import RayCaster
 from lightfast.sim.daylight_scene import WindowGeometry
-from lightfast.sim.sky_model import LUMA, SUN_ANGULAR_RADIUS_RAD, SkyState
+from lightfast.sim.sky_model import LUMA, SUN_ANGULAR_RADIUS_RAD, SkyState, float3
 
 __all__ = [
     "COMPONENTS",
@@ -577,6 +577,7 @@ class GroundTruthRenderer:
                              + np.sqrt(np.clip(1 - u1, 0, 1))[..., None] * n[:, None])
             # 2. window rectangle
             if n_w:
+                assert window is not None  # n_w > 0 only with a window
                 a, b = _stratified_2d(rng, m, n_w)
                 q = (self._wc + ((2 * a - 1) * window.half_u_m)[..., None] * self._wu
                      + ((2 * b - 1) * window.half_v_m)[..., None] * self._wv)
@@ -584,6 +585,7 @@ class GroundTruthRenderer:
                 dirs[:, n_c:n_c + n_w] = dv / np.linalg.norm(dv, axis=-1, keepdims=True)
             # 3. sunlit pool
             if n_s:
+                assert pool is not None  # n_s > 0 only with a sunlit pool
                 pick = rng.integers(0, len(pool["hit"]), size=(m, n_s))
                 ys = pool["points"][pick]
                 dv = ys - p[:, None]
@@ -612,6 +614,7 @@ class GroundTruthRenderer:
             hit_p[:, :n_cw] = origin[:, None] + dirs[:, :n_cw] * dist[:, :n_cw, None]
             lit = np.zeros((m, n_all), dtype=bool)
             if n_s:
+                assert pool is not None
                 ok = pool["hit"][pick] & (cos_v[:, n_cw:] > 0)
                 pn = pool["normals"][pick]
                 ok &= np.einsum("mkj,mkj->mk", pn, dirs[:, n_cw:]) < 0  # the lit side faces the vertex
@@ -676,7 +679,7 @@ class GroundTruthRenderer:
         else:
             M = sp.csr_matrix((V, V), dtype=np.float32)
         rho = self._rho
-        src = np.zeros((V, 4, 3), dtype=np.float32)
+        src: NDArray[np.float32] = np.zeros((V, 4, 3), dtype=np.float32)
         src[:, 0] = sun_direct[:, None]
         src[:, 1] = escaped["clear"][:, None]
         src[:, 2] = escaped["overcast"][:, None]
@@ -707,7 +710,7 @@ class GroundTruthRenderer:
             "matrix_nnz": float(M.nnz),
             "vertices": float(V),
         }
-        return IrradianceCache(tuple(float(x) for x in sun), irr, sun_direct.astype(np.float32), cfg, stats)
+        return IrradianceCache(float3(sun), irr, sun_direct.astype(np.float32), cfg, stats)
 
     def smoothing_matrix(self, radius_m: float) -> sp.csr_matrix:
         """The sparse (V, V) denoising filter of the irradiance cache: at each vertex, a weighted local *linear*

@@ -62,7 +62,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import Any, Protocol, cast
 
 import cv2
 import numpy as np
@@ -344,7 +344,8 @@ def _sim_apply(S: Array, T: Array) -> Array:
 
 
 def _gray(image: NDArray[np.uint8]) -> NDArray[np.uint8]:
-    return image if image.ndim == 2 else cv2.cvtColor(np.ascontiguousarray(image), cv2.COLOR_RGB2GRAY)
+    return image if image.ndim == 2 else cast(NDArray[np.uint8],
+                                              cv2.cvtColor(np.ascontiguousarray(image), cv2.COLOR_RGB2GRAY))
 
 
 def select_semidense(gray: NDArray[np.uint8], *, threshold: float, block_px: int) -> NDArray[np.int64]:

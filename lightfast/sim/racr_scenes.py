@@ -107,7 +107,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from functools import cached_property
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import cv2
 import numpy as np
@@ -130,6 +130,7 @@ from lightfast.sim.sky_model import (
     OVERCAST_SKY_RGB,
     SkyState,
     clear_sky_irradiance,
+    float3,
     sun_rgb,
 )
 
@@ -267,6 +268,11 @@ class Canvas:
                 + (img[yb, xa] * (1 - fx) + img[yb, xb] * fx) * fy).astype(np.float64)
 
 
+def _blur(a: NDArray[np.float32], sigma: float) -> NDArray[np.float32]:
+    """``cv2.GaussianBlur`` of a canvas' data, the kernel size from ``sigma`` (float32 in, float32 out)."""
+    return cast(NDArray[np.float32], cv2.GaussianBlur(a, (0, 0), sigma))
+
+
 def _mask(canvas: Canvas) -> NDArray[np.uint8]:
     return np.zeros(canvas.data.shape[:2], np.uint8)
 
@@ -315,11 +321,11 @@ def _words(rng: np.random.Generator, n: int) -> str:
 Material = Callable[[F64, F64, F64], F64]
 
 
-def _rgb(c: Sequence[float]) -> F64:
+def _rgb(c: ArrayLike) -> F64:
     return np.asarray(c, dtype=np.float64)
 
 
-def stone(base: Sequence[float], seed: int, *, contrast: float = 0.22, lichen: float = 0.0,
+def stone(base: ArrayLike, seed: int, *, contrast: float = 0.22, lichen: float = 0.0,
           grime: float = 0.45) -> Material:
     """Stone: blotches (5 cm), grain (4 mm), dark/bright speckles (1.5 mm), grime in recesses, optional lichen."""
     b = _rgb(base)
@@ -338,7 +344,7 @@ def stone(base: Sequence[float], seed: int, *, contrast: float = 0.22, lichen: f
     return f
 
 
-def paint(base: Sequence[float], seed: int, *, rust: float = 0.0, scratches: float = 0.5) -> Material:
+def paint(base: ArrayLike, seed: int, *, rust: float = 0.0, scratches: float = 0.5) -> Material:
     """Painted metal: slight mottling, scratches down to bare metal, rust stains, grime in recesses."""
     b = _rgb(base)
 
@@ -358,7 +364,7 @@ def paint(base: Sequence[float], seed: int, *, rust: float = 0.0, scratches: flo
     return f
 
 
-def metal(base: Sequence[float], seed: int) -> Material:
+def metal(base: ArrayLike, seed: int) -> Material:
     b = _rgb(base)
 
     def f(p: F64, h: F64, uv: F64) -> F64:
@@ -366,7 +372,7 @@ def metal(base: Sequence[float], seed: int) -> Material:
     return f
 
 
-def wood(base: Sequence[float], seed: int, *, axis: int = 0) -> Material:
+def wood(base: ArrayLike, seed: int, *, axis: int = 0) -> Material:
     """Wood grain along the world ``axis``: distorted rings and streaks."""
     b = _rgb(base)
 
@@ -380,7 +386,7 @@ def wood(base: Sequence[float], seed: int, *, axis: int = 0) -> Material:
     return f
 
 
-def plaster(base: Sequence[float], seed: int) -> Material:
+def plaster(base: ArrayLike, seed: int) -> Material:
     b = _rgb(base)
 
     def f(p: F64, h: F64, uv: F64) -> F64:
@@ -417,8 +423,8 @@ class _Part:
 def _grid_faces(nu: int, nv: int, wrap_u: bool) -> NDArray[np.int64]:
     """Two triangles per cell of an ``nu × nv`` vertex grid (u-major); front side is ∂u × ∂v."""
     iu = np.arange(nu if wrap_u else nu - 1)
-    i, j = np.meshgrid(iu, np.arange(nv - 1), indexing="ij")
-    i, j = i.ravel(), j.ravel()
+    i_grid, j_grid = np.meshgrid(iu, np.arange(nv - 1), indexing="ij")
+    i, j = i_grid.ravel(), j_grid.ravel()
     i1 = (i + 1) % nu
     a, b, c, d = i * nv + j, i1 * nv + j, i1 * nv + j + 1, i * nv + j + 1
     return np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
@@ -429,7 +435,7 @@ def _lines(a: float, b: float, step: float) -> F64:
     return np.linspace(a, b, n + 1)
 
 
-def _unit(v: Sequence[float] | F64) -> F64:
+def _unit(v: ArrayLike) -> F64:
     a = np.asarray(v, dtype=np.float64)
     return a / np.linalg.norm(a)
 
@@ -486,7 +492,7 @@ class _Builder:
         P = P0 + h[..., None] * n
         self._add(P, h, np.stack([U, V], -1), material, decal, False, len(us), len(vs))
 
-    def lathe(self, center: Sequence[float], axis: Sequence[float], ref: Sequence[float],
+    def lathe(self, center: ArrayLike, axis: ArrayLike, ref: ArrayLike,
               profile: Sequence[tuple[float, float]], material: Material, *, step: float | None = None,
               n_theta: int | None = None, relief: Canvas | None = None, rough_m: float = 0.0,
               taper_m: float = 0.003) -> None:
@@ -555,7 +561,7 @@ class _Builder:
             for p in self.parts[first:]:
                 p.vertices = (p.vertices - pv) @ np.asarray(R).T + pv
 
-    def bolt(self, pos: Sequence[float], normal: Sequence[float], radius: float, material: Material, *,
+    def bolt(self, pos: ArrayLike, normal: ArrayLike, radius: float, material: Material, *,
              height: float | None = None, washer: bool = True) -> None:
         """A hex bolt head (and washer) standing on a surface at ``pos`` with outward ``normal``."""
         n = _unit(normal)
@@ -691,7 +697,7 @@ def _panel(b: _Builder, rng: np.random.Generator, seed: int, outdoor: bool) -> t
     _text_lines(cv, text, [_words(rng, 3)], (bw + 0.015, bw + 0.006, W - bw - 0.015, bw + 0.04),
                 _FONTS[int(rng.integers(0, 3))], 0.0018)
     _add_relief(cv, text, -0.002, 0.001)
-    cv.data = cv2.GaussianBlur(cv.data, (0, 0), 0.6)
+    cv.data = _blur(cv.data, 0.6)
     if outdoor:
         b.box((-W / 2 - 0.05, -T / 2 - 0.05, 0.0), (W + 0.1, T + 0.1, z0), stone(base * 0.85, seed + 9),
               step=b.coarse, front={"rough_m": 0.002})
@@ -726,7 +732,7 @@ def _tablet(b: _Builder, rng: np.random.Generator, seed: int, outdoor: bool) -> 
     for _ in range(int(rng.integers(40, 120))):
         cv2.circle(pits, cv.px(rng.uniform(0, W), rng.uniform(0, H)), int(rng.integers(1, 4)), 255, -1)
     _add_relief(cv, pits, -0.0012, 0.001)
-    cv.data = cv2.GaussianBlur(cv.data, (0, 0), 0.6)
+    cv.data = _blur(cv.data, 0.6)
     if outdoor:
         b.box((-W / 2 - 0.06, -T / 2 - 0.06, 0.0), (W + 0.12, T + 0.12, z0), stone(base * 0.8, seed + 9),
               step=b.coarse, front={"rough_m": 0.002})
@@ -790,7 +796,7 @@ def _cabinet(b: _Builder, rng: np.random.Generator, seed: int, outdoor: bool) ->
     key = _mask(cv)
     cv2.circle(key, cv.px(W - ins - 0.035, H * 0.5), 6, 255, -1, cv2.LINE_AA)
     _add_relief(cv, key, -0.004, 0.001)
-    cv.data = cv2.GaussianBlur(cv.data, (0, 0), 0.5)
+    cv.data = _blur(cv.data, 0.5)
     decal = Canvas.blank(W, H, 0.0005, channels=4)
     warn = _decal_label(0.12, 0.05, ["DANGER", f"{int(rng.integers(2, 20)) * 100} VOLT"], (0.85, 0.7, 0.05),
                         (0.03, 0.03, 0.03))
@@ -914,7 +920,7 @@ def _stupa(b: _Builder, rng: np.random.Generator, seed: int, outdoor: bool) -> t
                     -1, cv2.LINE_AA)
         cv2.circle(fig, cv.px(u, Ph * 0.72), int(0.07 * P / nn / 0.001), 255, -1, cv2.LINE_AA)
     _add_relief(cv, fig, 0.004 * k, 0.002)
-    cv.data = cv2.GaussianBlur(cv.data, (0, 0), 0.6)
+    cv.data = _blur(cv.data, 0.6)
     b.box((-P / 2, -P / 2, 0.0), (P, P, Ph), mat, step=3 * b.res, front={"relief": cv, "rough_m": 0.001,
                                                                            "step": b.res})
     z = Ph
@@ -993,7 +999,7 @@ def _facade(b: _Builder, rng: np.random.Generator, seed: int, outdoor: bool) -> 
     diff = (cv2.Sobel(blocks.astype(np.float32), cv2.CV_32F, 1, 0) != 0) | (
         cv2.Sobel(blocks.astype(np.float32), cv2.CV_32F, 0, 1) != 0)
     joints[diff | (edges > 0)] = 255
-    joints = cv2.dilate(joints, np.ones((5, 5), np.uint8))
+    joints = cast(NDArray[np.uint8], cv2.dilate(joints, np.ones((5, 5), np.uint8)))
     solid = (255 - joints).astype(np.uint8)
     offs = _hash3(np.arange(bid + 1), np.zeros(bid + 1, np.int64), np.zeros(bid + 1, np.int64), seed)
     cv.data += (_profile(solid, 0.001, 0.008) * 0.008 + _profile(solid, 0.001, 0.008) * (offs[blocks] - 0.5) * 0.004)
@@ -1008,7 +1014,7 @@ def _facade(b: _Builder, rng: np.random.Generator, seed: int, outdoor: bool) -> 
                  cv.px(eu + 0.052 * math.cos(a), ev + 0.052 * math.sin(a)), 255, 3, cv2.LINE_AA)
     _text_lines(cv, em, [_words(rng, 2)], (eu - 0.2, ev - 0.11, eu + 0.2, ev - 0.07), _FONTS[0], 0.002)
     _add_relief(cv, em, -0.003, 0.0012)
-    cv.data = cv2.GaussianBlur(cv.data, (0, 0), 0.6)
+    cv.data = _blur(cv.data, 0.6)
     # per-block tone as a translucent decal
     tone_rgb = 0.8 + 0.4 * _hash3(np.arange(bid + 1), np.ones(bid + 1, np.int64), np.zeros(bid + 1, np.int64), seed)
     tone.data[..., :3] = (base[None, None, :] * tone_rgb[blocks][..., None]).astype(np.float32)
@@ -1049,7 +1055,7 @@ def _bogie(b: _Builder, rng: np.random.Generator, seed: int, outdoor: bool) -> t
     _text_lines(cv, txt, [f"{int(rng.integers(10, 99))}-{int(rng.integers(1000, 9999))} {_words(rng, 1)}"],
                 (Lf * 0.35, Hf * 0.05, Lf * 0.65, Hf * 0.22), cv2.FONT_HERSHEY_SIMPLEX, 0.002)
     _add_relief(cv, txt, 0.0015, 0.0008)
-    cv.data = cv2.GaussianBlur(cv.data, (0, 0), 0.6)
+    cv.data = _blur(cv.data, 0.6)
     b.box((-Lf / 2, yf, zf), (Lf, Tf, Hf), body, step=3 * b.res, front={"relief": cv, "rough_m": 0.0004,
                                                                          "step": b.res})
     for u in np.linspace(0.04, Lf - 0.04, 14):
@@ -1134,7 +1140,7 @@ class LightingSpec:
         unknown = set(d) - names
         if unknown:
             raise RacrSimError(f"unknown lighting key(s): {sorted(unknown)}")
-        kw = {k: (tuple(float(x) for x in v) if isinstance(v, list) else v) for k, v in d.items()}
+        kw: dict[str, Any] = {k: (tuple(float(x) for x in v) if isinstance(v, list) else v) for k, v in d.items()}
         return cls(**kw)
 
 
@@ -1346,7 +1352,7 @@ class RacrRenderer:
         d = np.einsum("ij,kj->ik", d_cam, R)  # (not d_cam @ R.T: BLAS threads are slow for N x 3 @ 3 x 3)
         hits = self.caster.intersect(t, d)
         hi = np.flatnonzero(hits.hit)
-        radiance = np.zeros((H * W, 3), np.float32)
+        radiance: NDArray[np.float32] = np.zeros((H * W, 3), np.float32)
         shadow = np.zeros(H * W, bool)
         if len(hi):
             tri = hits.triangle_id[hi]
@@ -1529,7 +1535,7 @@ def scene_specs(seed: int = 0) -> tuple[RacrSceneSpec, ...]:
         name = f"S{i + 1:02d}"
         outdoor = i >= 10
         recipe = (_OUTDOOR if outdoor else _INDOOR)[i % 10]
-        common = dict(
+        common: dict[str, Any] = dict(
             camera_azimuth_deg=round(float(rng.uniform(-20, 20)), 2),
             camera_elevation_deg=round(float(rng.uniform(8, 25)), 2),
             camera_distance_scale=round(float(rng.uniform(0.95, 1.1)), 3),
@@ -1689,7 +1695,7 @@ class RacrScene:
         pos = _clock_position(self.truth.target_m, self.truth.T_world_camref, clock_h, tilt, dist)
         name = name or f"clock{clock_h:g}"
         spec = replace(ref, name=name, description=f"point light at {clock_h:g} o'clock", clock_h=float(clock_h),
-                       tilt_deg=tilt, position_m=tuple(float(x) for x in np.round(pos, 6)), exposure=None)
+                       tilt_deg=tilt, position_m=float3(np.round(pos, 6)), exposure=None)
         exp = self.renderer.auto_exposure(self.truth.T_world_cam0, self.camera, resolve_lighting(spec, None))
         self.lightings[name] = replace(spec, exposure=float(f"{exp:.6g}"))
         return name
@@ -1746,8 +1752,10 @@ def build_scene(spec: RacrSceneSpec, *, width: int = 640, height: int = 480,
         if lt.kind == "point" and lt.position_m is None:
             pos_l = _clock_position(target, T_world_camref, lt.clock_h or 12.0, lt.tilt_deg or 35.0,
                                     lt.distance_m or 1.0)
-            lt = replace(lt, position_m=tuple(float(x) for x in np.round(pos_l, 6)))
+            lt = replace(lt, position_m=float3(np.round(pos_l, 6)))
         if lt.kind == "daylight":
+            if site is None or lt.time_local is None:
+                raise RacrSimError(f"lighting {lt.name!r}: daylight needs a site and a local time")
             sp = sun_position(site, dt.datetime.fromisoformat(lt.time_local).replace(tzinfo=site.zone))
             lt = replace(lt, sun_azimuth_deg=round(float(sp.azimuth_deg), 3),
                          sun_elevation_deg=round(float(sp.elevation_deg), 3))
@@ -1828,7 +1836,7 @@ def _npz_bytes(**arrays: NDArray[Any]) -> bytes:
     import io
 
     buf = io.BytesIO()
-    np.savez(buf, **arrays)
+    np.savez(buf, allow_pickle=True, **arrays)  # the default, explicit: **arrays are arrays only
     return buf.getvalue()
 
 
@@ -1887,7 +1895,8 @@ def load_reference(path: str | os.PathLike[str], *, scene: str | None = None) ->
         raise RacrSimError(f"{path}: image {img.shape[:2]} does not match the intrinsics {cam.shape}")
     return ReferenceObservation(str(doc["scene"]), str(doc.get("lighting", "")), cam,
                                 _from_mat(doc.get("T_ref_camref"), "T_ref_camref"), pts, inten,
-                                cv2.cvtColor(img, cv2.COLOR_BGR2RGB), str(doc.get("frame_id", "reference")))
+                                cast(NDArray[np.uint8], cv2.cvtColor(img, cv2.COLOR_BGR2RGB)),
+                                str(doc.get("frame_id", "reference")))
 
 
 def _sha256(path: Path) -> str:

@@ -251,7 +251,7 @@ def rtrace_options(*, ambient_bounces: int = DEFAULT_AMBIENT_BOUNCES,
 
 
 def _irradiance_samples(
-    mesh: ReflectanceMesh, points_m: ArrayLike, normals: ArrayLike, *, component: str,
+    mesh: ReflectanceMesh, points_m: ArrayLike, normals: ArrayLike, *, component: Component,
     sun_direction: ArrayLike | None, sun_disk_samples: int, ambient_bounces: int, ambient_divisions: int,
     repeats: int, processes: int, up: ArrayLike, workdir: str | os.PathLike[str] | None, timeout_s: float,
 ) -> NDArray[np.float64]:

@@ -41,7 +41,9 @@ Colours (simple, documented choices — not spectral):
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass
+from typing import SupportsFloat, cast
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -59,9 +61,16 @@ __all__ = [
     "SkyDistribution",
     "SkyState",
     "clear_sky_irradiance",
+    "float3",
     "luminance",
     "sun_rgb",
 ]
+
+def float3(values: Iterable[SupportsFloat]) -> tuple[float, float, float]:
+    """``tuple(float(x) for x in values)`` for ``values`` known to hold three numbers (not checked), typed as a
+    3-tuple."""
+    return cast(tuple[float, float, float], tuple(float(x) for x in values))
+
 
 #: Rec. 709 / sRGB luminance weights of linear RGB.
 LUMA = np.array([0.2126, 0.7152, 0.0722])

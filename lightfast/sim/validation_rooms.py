@@ -145,7 +145,7 @@ def _check_sizes(size_m: Sequence[float], window: Window, wall_thickness_m: floa
         raise ValidationRoomError(f"window must be (width, height, sill height, wall), got {window!r}")
 
 
-def _room_shell(size_m: tuple[float, float, float], window: Window, wall_thickness_m: float, floor_rho: ArrayLike,
+def _room_shell(size_m: Sequence[float], window: Window, wall_thickness_m: float, floor_rho: ArrayLike,
                 wall_rho: ArrayLike, ceiling_rho: ArrayLike, tessellation_m: float
                 ) -> tuple[list[ReflectanceMesh], _WallFrame, tuple[float, float, float, float]]:
     _check_sizes(size_m, window, wall_thickness_m, tessellation_m)

@@ -69,6 +69,7 @@ import time
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 import yaml
@@ -97,6 +98,9 @@ from lightfast.sim.vtr_route import (
     spectrum_cct,
 )
 from lightfast.topics import GT_POSE_TOPIC, MAP_FRAME
+
+if TYPE_CHECKING:
+    from lightfast.ros.msgtypes import MessageTypes
 
 __all__ = [
     "DEFAULT_RUNS",
@@ -269,7 +273,7 @@ def drive_route(scene: RouteScene, cfg: DriveConfig, *, teach: bool, seed: int |
         raise ValueError(f"route of {scene.length_m} m is too short to drive")
     dt_s = 1.0 / cfg.rate_hz
     n_max = int((end - cfg.start_m) / (cfg.speed_mps * dt_s * (1.0 - cfg.speed_variation))) + 2
-    t = np.arange(n_max) * dt_s
+    t = cast(NDArray[np.float64], np.arange(n_max) * dt_s)
     v = cfg.speed_mps * (1.0 + cfg.speed_variation * _wander(t, rng, (20.0, 90.0)))
     s = cfg.start_m + np.concatenate([[0.0], np.cumsum(v[:-1] * dt_s)])
     n = int(np.searchsorted(s, end, side="right"))
@@ -387,11 +391,11 @@ def _weather_series(spec: RunSpec, t: NDArray[np.float64], rng: np.random.Genera
     return cloud, np.maximum(direct, 0.0)
 
 
-def _right_info(types: object, rig: StereoRig, stamp_ns: int) -> object:
+def _right_info(types: MessageTypes, rig: StereoRig, stamp_ns: int) -> Any:
     from lightfast.ros.convert import camera_info_from_camera
 
     msg = camera_info_from_camera(rig.camera, stamp_ns=stamp_ns, frame_id=RIGHT_FRAME, types=types)
-    msg.p = types.float64_array(rig.P_right.reshape(-1))  # type: ignore[attr-defined]
+    msg.p = types.float64_array(rig.P_right.reshape(-1))
     return msg
 
 
@@ -410,6 +414,8 @@ def _generate_run(spec: RunSpec, scene: RouteScene, renderer: SpectralRenderer, 
     start_ns = round(start.timestamp()) * 1_000_000_000
     stamps = start_ns + np.round(trj.time_s * 1e9).astype(np.int64)
     sun = sun_position(site, stamps)
+    sun_elevation_deg = cast(NDArray[np.float64], sun.elevation_deg)  # an array of times: arrays of angles
+    sun_azimuth_deg = cast(NDArray[np.float64], sun.azimuth_deg)
     cloud, direct_t = _weather_series(spec, trj.time_s, np.random.default_rng([seed, run_seed, 2]))
     camera = rig.camera
     types = rosbags_types()
@@ -428,7 +434,7 @@ def _generate_run(spec: RunSpec, scene: RouteScene, renderer: SpectralRenderer, 
                 bag.add_topic(topic, msgtype, offered_qos=qos)
             for i in track(range(n), desc=f"{spec.name} frames", total=n, enabled=progress, unit="frame"):
                 t0 = time.perf_counter()
-                el = float(sun.elevation_deg[i])
+                el = float(sun_elevation_deg[i])
                 light = daylight_illumination(sun.direction_map[i], el, spec.weather,
                                               cloud_transmittance=float(cloud[i]),
                                               direct_transmittance=float(direct_t[i]), atmosphere=atmosphere)
@@ -462,7 +468,7 @@ def _generate_run(spec: RunSpec, scene: RouteScene, renderer: SpectralRenderer, 
                     "stretch": STRETCHES[int(scene.stretch_at(trj.s_m[i]))],
                     "x_m": float(T_l[0, 3]), "y_m": float(T_l[1, 3]), "z_m": float(T_l[2, 3]),
                     "qx": float(q[0]), "qy": float(q[1]), "qz": float(q[2]), "qw": float(q[3]),
-                    "sun_azimuth_deg": float(sun.azimuth_deg[i]), "sun_elevation_deg": el,
+                    "sun_azimuth_deg": float(sun_azimuth_deg[i]), "sun_elevation_deg": el,
                     "weather": spec.weather, "cloud_transmittance": float(cloud[i]),
                     "direct_transmittance": float(direct_t[i]),
                     "direct_normal_vis_wm2": float(light.direct_normal.sum() * 10.0),
@@ -484,8 +490,8 @@ def _generate_run(spec: RunSpec, scene: RouteScene, renderer: SpectralRenderer, 
             "format_version": FORMAT_VERSION,
             "topics": list(TOPICS),
             "image_size": [rig.width, rig.height],
-            "sun_elevation_deg": [float(sun.elevation_deg[0]), float(sun.elevation_deg[-1])],
-            "sun_azimuth_deg": [float(sun.azimuth_deg[0]), float(sun.azimuth_deg[-1])],
+            "sun_elevation_deg": [float(sun_elevation_deg[0]), float(sun_elevation_deg[-1])],
+            "sun_azimuth_deg": [float(sun_azimuth_deg[0]), float(sun_azimuth_deg[-1])],
             **cct,
             "exposure_s_range": [min(r["exposure_s"] for r in rows), max(r["exposure_s"] for r in rows)],
             "gain_range": [min(r["gain"] for r in rows), max(r["gain"] for r in rows)],

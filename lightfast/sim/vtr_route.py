@@ -113,6 +113,7 @@ import time
 from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import asdict, dataclass, field
+from typing import Any
 
 import numba
 import numpy as np
@@ -757,10 +758,11 @@ class RouteConfig:
     @classmethod
     def for_tests(cls, length_m: float = 30.0, seed: int = 7, **kw: object) -> RouteConfig:
         """A small, quick scene: a short route, a narrow coarse corridor, a small texture."""
-        base = dict(length_m=length_m, seed=seed, corridor_half_width_m=10.0, grid_m=0.5, outer_margin_m=40.0,
-                    outer_grid_m=4.0, extension_m=10.0, sky_samples=12, texture_size=256)
+        base: dict[str, Any] = dict(length_m=length_m, seed=seed, corridor_half_width_m=10.0, grid_m=0.5,
+                                    outer_margin_m=40.0, outer_grid_m=4.0, extension_m=10.0, sky_samples=12,
+                                    texture_size=256)
         base.update(kw)
-        return cls(**base)  # type: ignore[arg-type]
+        return cls(**base)
 
 
 @dataclass(frozen=True, eq=False)

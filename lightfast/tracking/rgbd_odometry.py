@@ -67,6 +67,7 @@ import math
 import time
 from collections.abc import Iterable
 from dataclasses import dataclass
+from typing import cast
 
 import cv2
 import numba
@@ -304,7 +305,7 @@ def _check_depth(depth_m: ArrayLike, name: str, cfg: TrackingConfig) -> NDArray[
 def _downsample_grey(grey: NDArray[np.float32]) -> NDArray[np.float32]:
     """2×2 block means (``INTER_AREA`` at exactly half size)."""
     h, w = grey.shape[0] // 2, grey.shape[1] // 2
-    return cv2.resize(grey[: 2 * h, : 2 * w], (w, h), interpolation=cv2.INTER_AREA)
+    return cast(NDArray[np.float32], cv2.resize(grey[: 2 * h, : 2 * w], (w, h), interpolation=cv2.INTER_AREA))
 
 
 @numba.njit(cache=True, nogil=True)

@@ -83,7 +83,7 @@ import functools
 import logging
 import math
 from dataclasses import dataclass
-from typing import Final
+from typing import Final, cast
 
 import cv2
 import numpy as np
@@ -194,7 +194,7 @@ def _wavelengths(wavelengths_nm: tuple[float, ...] | list[float]) -> tuple[float
     lam = tuple(float(x) for x in wavelengths_nm)
     if len(lam) != 3 or not all(math.isfinite(x) and x > 0 for x in lam) or lam[0] == lam[2]:
         raise VtrInputError(f"need three positive wavelengths (R1, R2, R3) with R1 != R3, got {wavelengths_nm}")
-    return lam  # type: ignore[return-value]
+    return lam
 
 
 def constrained_weights(wavelengths_nm: tuple[float, ...] | list[float]) -> tuple[float, float]:
@@ -327,7 +327,7 @@ def greyscale(rgb: NDArray[np.generic], config: ColorConstantConfig | None = Non
         a = np.clip(x + 0.5, 0, 255).astype(np.uint8)
     if cfg.grey == "green":
         return np.ascontiguousarray(a[..., _RGB_GREEN])
-    return cv2.cvtColor(np.ascontiguousarray(a), cv2.COLOR_RGB2GRAY)
+    return cast(NDArray[np.uint8], cv2.cvtColor(np.ascontiguousarray(a), cv2.COLOR_RGB2GRAY))
 
 
 def image_sources(
@@ -346,7 +346,7 @@ def image_sources(
         raise VtrInputError(f"unknown image source(s) {unknown}; known: {list(SOURCES)}")
     a = _check_rgb(rgb)
     if a.dtype == np.uint8 and cfg.normalization == "fixed":
-        return _image_sources_uint8(a, cfg, tuple(sources))
+        return _image_sources_uint8(cast(NDArray[np.uint8], a), cfg, tuple(sources))
     out: dict[str, SourceImage] = {}
     for name in sources:
         if name == "grey":
@@ -392,7 +392,8 @@ def _image_sources_uint8(rgb: NDArray[np.uint8], cfg: ColorConstantConfig, sourc
         if valid is None:
             levels = np.arange(256, dtype=np.float64)
             ok = ((levels >= cfg.min_valid) & (levels < cfg.saturation_level)).astype(np.uint8)
-            valid = (cv2.LUT(red, ok) & cv2.LUT(green, ok) & cv2.LUT(blue, ok)).astype(bool)
+            r_ok, g_ok, b_ok = (cast(NDArray[np.uint8], cv2.LUT(c, ok)) for c in (red, green, blue))
+            valid = (r_ok & g_ok & b_ok).astype(bool)
         t_g, t_b, t_r, fill = _source_tables(name, cfg)
         f = cv2.add(cv2.add(cv2.LUT(green, t_g), cv2.LUT(blue, t_b)), cv2.LUT(red, t_r))
         image = np.clip(f, 0.0, 255.0, out=f).astype(np.uint8)

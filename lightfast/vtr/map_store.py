@@ -80,7 +80,7 @@ MAP_VERSION: Final = 1
 MANIFEST: Final = "manifest.json"
 STAGING: Final = "staging.json"
 KEYFRAME_DIR: Final = "keyframes"
-_DESCRIPTOR_DTYPE: Final = {"orb": np.dtype(np.uint8), "sift": np.dtype(np.float32)}
+_DESCRIPTOR_DTYPE: Final[dict[str, np.dtype[Any]]] = {"orb": np.dtype(np.uint8), "sift": np.dtype(np.float32)}
 _RIGID_ATOL: Final = 1e-6
 
 
@@ -349,7 +349,7 @@ class MapWriter:
             arrays[f"{s}_descriptors"] = np.ascontiguousarray(lm.descriptors, _DESCRIPTOR_DTYPE[self.feature])
             counts[s] = len(lm)
         buf = io.BytesIO()
-        np.savez(buf, **arrays)
+        np.savez(buf, allow_pickle=True, **arrays)  # the default, explicit: **arrays are arrays only
         data = buf.getvalue()
         name = _keyframe_file(index)
         write_bytes_atomic(self._tmp / name, data)
@@ -583,7 +583,8 @@ class MapStore:
             raise MapNotFoundError(f"{root} is not the staging directory of a teach ({STAGING} missing)")
         h = read_json_mapping(root / STAGING, error=MapCorruptError, what="staging header")
         sources, feature, dim, Pl, Pr, size = _check_header(h, root / STAGING)
-        keyframes, Ts = [], []
+        keyframes: list[Keyframe] = []
+        Ts: list[NDArray[np.float64]] = []
         while (root / _keyframe_file(len(keyframes))).is_file():
             kf, T = _load_keyframe(root, {}, len(keyframes), sources, feature, dim, None)
             keyframes.append(kf)

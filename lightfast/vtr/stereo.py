@@ -78,7 +78,7 @@ import logging
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Final
+from typing import Final, cast
 
 import cv2
 import numba
@@ -244,15 +244,16 @@ class FeatureExtractor:
     def __init__(self, config: StereoConfig | None = None) -> None:
         self.config = config or StereoConfig()
         c = self.config
+        self._detector: cv2.Feature2D
         if c.feature == "orb":
-            self._detector = cv2.ORB_create(
+            self._detector = cv2.ORB.create(
                 nfeatures=c.max_features,
                 scaleFactor=c.orb_scale_factor,
                 nlevels=c.orb_levels,
                 fastThreshold=c.orb_fast_threshold,
             )
         else:
-            self._detector = cv2.SIFT_create(nfeatures=c.max_features, contrastThreshold=c.sift_contrast_threshold)
+            self._detector = cv2.SIFT.create(nfeatures=c.max_features, contrastThreshold=c.sift_contrast_threshold)
 
     @property
     def kind(self) -> str:
@@ -267,7 +268,7 @@ class FeatureExtractor:
         img = np.asarray(image)
         if img.ndim != 2 or img.dtype != np.uint8:
             raise VtrInputError(f"feature detection needs an (H, W) uint8 image, got {img.dtype} {img.shape}")
-        mask = None
+        mask: NDArray[np.uint8] | None = None
         if valid is not None:
             v = np.asarray(valid)
             if v.shape != img.shape:
@@ -276,13 +277,15 @@ class FeatureExtractor:
                 mask = v.astype(np.uint8)
                 r = self.config.mask_erosion_px
                 if r > 0:
-                    mask = cv2.erode(mask, cv2.getStructuringElement(cv2.MORPH_RECT, (2 * r + 1, 2 * r + 1)))
+                    mask = cast(NDArray[np.uint8],
+                                cv2.erode(mask, cv2.getStructuringElement(cv2.MORPH_RECT, (2 * r + 1, 2 * r + 1))))
                 if not mask.any():
                     return self.empty()
         kps, desc = self._detector.detectAndCompute(np.ascontiguousarray(img), mask)
         if desc is None or len(kps) == 0:
             return self.empty()
-        uv = cv2.KeyPoint_convert(kps).astype(np.float32).reshape(-1, 2)
+        # an (N, 2) float32 array at run time (the stubs say a sequence of points)
+        uv = cast(NDArray[np.float32], cv2.KeyPoint.convert(kps)).astype(np.float32).reshape(-1, 2)
         dtype = np.uint8 if self.kind == "orb" else np.float32
         return Features(uv, np.ascontiguousarray(desc, dtype=dtype), self.kind)
 
@@ -308,8 +311,8 @@ def descriptor_distances(a: NDArray[np.generic], b: NDArray[np.generic], kind: s
             for k in range(wa.shape[1]):  # over the 64-bit words of a descriptor (4 for ORB), not over features
                 d += np.bitwise_count(wa[:, k, None] ^ wb[None, :, k])
             return d.astype(np.float32)
-        ba = np.unpackbits(a, axis=1).astype(np.float32)
-        bb = np.unpackbits(b, axis=1).astype(np.float32)
+        ba = np.unpackbits(cast(NDArray[np.uint8], a), axis=1).astype(np.float32)  # uint8: _check_orb
+        bb = np.unpackbits(cast(NDArray[np.uint8], b), axis=1).astype(np.float32)
         return np.rint(ba.sum(axis=1)[:, None] + bb.sum(axis=1)[None, :] - 2.0 * (ba @ bb.T)).astype(np.float32)
     if kind == "sift":
         fa, fb = a.astype(np.float32, copy=False), b.astype(np.float32, copy=False)
@@ -660,12 +663,14 @@ def search_stereo(
     a, b = left.astype(np.float32), right.astype(np.float32)
     us = np.rint(uv_left[:, 0]).astype(np.int64)
     vs = np.rint(uv_left[:, 1]).astype(np.int64)
-    sum_r, sq_r = cv2.integral2(right, sdepth=cv2.CV_64F, sqdepth=cv2.CV_64F)
+    sum_r, sq_r = cast(tuple[NDArray[np.float64], NDArray[np.float64]],
+                       cv2.integral2(right, sdepth=cv2.CV_64F, sqdepth=cv2.CV_64F))
     d, z, second = _zncc_row_search(a, b, sum_r, sq_r, us, vs, d_lo, d_hi, r, -1, _MIN_TEXTURE)
     ok = (d >= 0) & (z >= c.search_min_zncc) & (1.0 - z < c.search_uniqueness * (1.0 - second))
     idx = np.flatnonzero(ok)
     if idx.size:  # left-right consistency: the right patch searched back along the left row
-        sum_l, sq_l = cv2.integral2(left, sdepth=cv2.CV_64F, sqdepth=cv2.CV_64F)
+        sum_l, sq_l = cast(tuple[NDArray[np.float64], NDArray[np.float64]],
+                           cv2.integral2(left, sdepth=cv2.CV_64F, sqdepth=cv2.CV_64F))
         back, _, _ = _zncc_row_search(b, a, sum_l, sq_l, us[idx] - d[idx], vs[idx], d_lo, d_hi, r, 1, _MIN_TEXTURE)
         idx = idx[(back >= 0) & (np.abs(back - d[idx]) <= 1)]
     return idx.astype(np.intp), d[idx].astype(np.float32), (1.0 - z[idx]).astype(np.float32)

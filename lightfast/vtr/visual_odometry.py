@@ -38,7 +38,7 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import dataclass, field
-from typing import Final
+from typing import Final, cast
 
 import numba
 import numpy as np
@@ -278,7 +278,7 @@ def refine_pose_stereo(
             delta = -np.linalg.solve(H + lam * np.diag(np.diag(H) + 1e-12), g)
         except np.linalg.LinAlgError:
             break
-        T_new = _exp_se3(delta) @ T
+        T_new = _exp_se3(cast(NDArray[np.float64], delta)) @ T  # float64 normal equations
         r_new, p_new, front_new = _stereo_residuals(T_new, points_ref, uvd_cur, K, fb)
         cost_new = float(np.sum(r_new**2)) if front_new.all() else math.inf
         if cost_new < cost:
@@ -598,6 +598,7 @@ def estimate_pose_stereo(
         n_cons = min(round(h * consistent_fraction), h - n_ord) if consistent is not None else 0
         s = rng.integers(0, m, size=(h - n_cons - n_ord, 3))
         if n_cons:
+            assert consistent is not None
             s = np.concatenate([consistent.sample(n_cons, rng), s])
         if n_ord:
             assert ordered is not None
