@@ -22,7 +22,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from lightfast.daylight.lighting_map import LightingMapConfig  # noqa: E402
-from lightfast.daylight.validation import TARGET_MEDIAN, TARGET_R, compare_with_radiance  # noqa: E402
+from lightfast.eval.radiosity_validation import TARGET_MEDIAN, TARGET_R, compare_with_radiance  # noqa: E402
 from lightfast.io import write_text_atomic  # noqa: E402
 from lightfast.sim.validation_rooms import box_room_with_window, furnished_room  # noqa: E402
 

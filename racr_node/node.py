@@ -5,7 +5,7 @@ scheme of §3.6).
 
 Parameters: ``config/racr_node.yaml``, from :class:`lightfast.racr.node_config.RacrNodeConfig`. The reference
 observation (point cloud in metres, reference camera pose, image, intrinsics) is read from the directory
-``reference_path`` (format ``lightfast-racr-reference``, :func:`lightfast.sim.racr_scenes.load_reference`); with
+``reference_path`` (format ``lightfast-racr-reference``, :func:`lightfast.racr.reference.load_reference`); with
 ``reference_scene`` a reference made for another scene is refused. While it cannot be loaded the node reports why
 on ``/racr/status`` (level ERROR, stage ``no_reference``), issues nothing and retries every ``reference_retry_s``.
 
@@ -68,6 +68,7 @@ from lightfast.errors import LightfastError
 from lightfast.geometry import matrix_to_quat, rotation_angle_deg
 from lightfast.racr.errors import RacrError
 from lightfast.racr.node_config import RacrNodeConfig
+from lightfast.racr.reference import ReferenceObservation, load_reference
 from lightfast.racr.session import MotionCommand, RacrSession, SessionStatus
 from lightfast.ros.clock import on_time_jump_back
 from lightfast.ros.convert import (
@@ -89,7 +90,6 @@ from lightfast.ros.racr_msgs import (
 )
 from lightfast.ros.ready import announce_ready
 from lightfast.ros.runtime import run_node
-from lightfast.sim.racr_scenes import ReferenceObservation, load_reference
 from lightfast.topics import (
     PLATFORM_HAND_FRAME,
     PLATFORM_HAND_GOAL_FRAME,

@@ -16,6 +16,7 @@ __all__ = [
     "DegenerateMotionError",
     "InitializationError",
     "RacrError",
+    "ReferenceFileError",
     "SchemeError",
 ]
 
@@ -52,3 +53,7 @@ class AcrError(RacrError, InputError, ValueError):
 class SchemeError(RacrError, InternalError):
     """The alignment thread of :mod:`~lightfast.racr.scheme` stopped on an unexpected error (the original is the
     ``__cause__``), or the scheme was used out of order (started twice, stepped while its thread runs)."""
+
+
+class ReferenceFileError(RacrError, InputError, ValueError):
+    """A reference observation directory is missing, half-written, damaged or made for another scene."""

@@ -119,8 +119,20 @@ from lightfast.daylight.errors import MeshError
 from lightfast.daylight.mesh import ReflectanceMesh, load_ply, save_ply
 from lightfast.daylight.sun import Site, sun_position
 from lightfast.geometry import inverse, make_transform, so3_exp
-from lightfast.io import atomic_directory, load_npz, read_versioned_yaml, write_bytes_atomic, write_text_atomic
+from lightfast.io import atomic_directory, write_bytes_atomic, write_text_atomic
 from lightfast.progress import track
+from lightfast.racr.reference import (
+    REFERENCE_VERSION,
+    ReferenceObservation,
+    camera_from_dict,
+    camera_to_dict,
+    load_reference,
+    matrix_from,
+    matrix_to_list,
+    png_bytes,
+    write_reference,
+    yaml_text,
+)
 from lightfast.raycast import RayCaster
 from lightfast.sim.errors import RacrSimError
 from lightfast.sim.racr_platform import PlatformConfig, PlatformSimulator, VseConfig, VseStandIn
@@ -138,14 +150,12 @@ __all__ = [
     "AFD_GRID",
     "AFD_SUCCESS_PX",
     "FORMAT_VERSION",
-    "REFERENCE_FORMAT",
     "AfdResult",
     "Lighting",
     "LightingSpec",
     "RacrRenderer",
     "RacrScene",
     "RacrSceneSpec",
-    "ReferenceObservation",
     "RenderResult",
     "SceneTruth",
     "SensorModel",
@@ -154,14 +164,12 @@ __all__ = [
     "build_scene",
     "camera_for_size",
     "generate_racr_set",
-    "load_reference",
     "load_scene",
     "look_at",
     "make_reference",
     "resolve_lighting",
     "scene_complete",
     "scene_specs",
-    "write_reference",
     "write_scene",
 ]
 
@@ -173,8 +181,6 @@ F32 = NDArray[np.float32]
 #: Version of the scene directory layout (scene.yaml, truth.yaml, manifest); bump when outputs change.
 FORMAT_VERSION = 1
 #: Format name and version of the reference observation directory.
-REFERENCE_FORMAT = "lightfast-racr-reference"
-REFERENCE_VERSION = 1
 #: AFD grid (columns, rows) of reference pixels, and the success threshold (paper: AFD < 3).
 AFD_GRID = (24, 18)
 AFD_SUCCESS_PX = 3.0
@@ -1611,22 +1617,6 @@ class SceneTruth:
         return self.T_world_camref @ self.T_camref_cam0
 
 
-@dataclass(frozen=True, eq=False)
-class ReferenceObservation:
-    """The reference observation (what rACR reads): cloud ``points_m`` (N, 3) float32 in frame ``reference``
-    (metres) with ``intensity`` (N,) float32 in [0, 1], reference camera pose ``T_ref_camref``, ``image``
-    (H, W, 3) uint8 RGB, ``camera`` intrinsics, the scene name and lighting name."""
-
-    scene: str
-    lighting: str
-    camera: PinholeCamera
-    T_ref_camref: F64
-    points_m: F32
-    intensity: F32
-    image: NDArray[np.uint8]
-    frame_id: str = "reference"
-
-
 @dataclass(eq=False)
 class RacrScene:
     """A built (or loaded) scene: spec, mesh, camera, resolved lighting variants, truth, reference."""
@@ -1795,108 +1785,10 @@ def make_reference(scene: RacrScene, *, seed: int = 0, lighting: str = "referenc
 # files
 
 
-def _mat(T: F64) -> list[list[float]]:
-    return [[float(x) for x in row] for row in np.asarray(T, float)]
-
-
-def _from_mat(x: Any, name: str, shape: tuple[int, ...] = (4, 4)) -> F64:
-    try:
-        a = np.asarray(x, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise RacrSimError(f"{name} must be a numeric matrix") from None
-    if a.shape != shape or not np.all(np.isfinite(a)):
-        raise RacrSimError(f"{name} must be a finite {shape} matrix, got shape {a.shape}")
-    return a
-
-
-def _camera_dict(c: PinholeCamera) -> dict[str, Any]:
-    return {"width": c.width, "height": c.height, "fx": c.fx, "fy": c.fy, "cx": c.cx, "cy": c.cy}
-
-
-def _camera_from(d: Any, where: str) -> PinholeCamera:
-    try:
-        return PinholeCamera(int(d["width"]), int(d["height"]), float(d["fx"]), float(d["fy"]), float(d["cx"]),
-                             float(d["cy"]))
-    except (KeyError, TypeError, ValueError) as exc:
-        raise RacrSimError(f"{where}: bad camera intrinsics: {exc}") from None
-
-
-def _dump(doc: dict[str, Any]) -> str:
-    return yaml.safe_dump(doc, sort_keys=False, default_flow_style=None, width=200)
-
-
-def _png(image: NDArray[np.uint8]) -> bytes:
-    ok, buf = cv2.imencode(".png", cv2.cvtColor(np.ascontiguousarray(image), cv2.COLOR_RGB2BGR))
-    if not ok:
-        raise RacrSimError("PNG encoding failed")
-    return buf.tobytes()
-
-
-def _npz_bytes(**arrays: NDArray[Any]) -> bytes:
-    import io
-
-    buf = io.BytesIO()
-    np.savez(buf, allow_pickle=True, **arrays)  # the default, explicit: **arrays are arrays only
-    return buf.getvalue()
-
-
 def _readable(root: Path) -> None:
     """Temporary files and directories are private (0600/0700); give the published tree the usual modes."""
     for p in [root, *root.rglob("*")]:
         p.chmod(0o755 if p.is_dir() else 0o644)
-
-
-def write_reference(ref: ReferenceObservation, path: str | os.PathLike[str]) -> Path:
-    """Write the reference observation directory atomically (replacing an existing one)."""
-    path = Path(path)
-    with atomic_directory(path, overwrite=True) as tmp:
-        (tmp / "points.npz").write_bytes(_npz_bytes(points_m=np.asarray(ref.points_m, np.float32),
-                                                    intensity=np.asarray(ref.intensity, np.float32)))
-        (tmp / "image.png").write_bytes(_png(ref.image))
-        doc = {
-            "format": REFERENCE_FORMAT, "format_version": REFERENCE_VERSION, "scene": ref.scene,
-            "lighting": ref.lighting, "frame_id": ref.frame_id,
-            "description": "rACR reference observation: point cloud (metres, frame_id) with grey intensity in "
-                           "[0, 1], reference camera pose T_ref_camref (optical frame -> frame_id), image, "
-                           "intrinsics",
-            "camera": _camera_dict(ref.camera), "T_ref_camref": _mat(ref.T_ref_camref),
-            "points": "points.npz", "image": "image.png", "num_points": len(ref.points_m),
-        }
-        (tmp / "reference.yaml").write_text(_dump(doc))
-        _readable(tmp)
-    return path
-
-
-def load_reference(path: str | os.PathLike[str], *, scene: str | None = None) -> ReferenceObservation:
-    """Load a reference observation directory; with ``scene``, refuse one made for another scene. Raises
-    :class:`RacrSimError` with the reason for a missing, half-written or foreign directory."""
-    path = Path(path)
-    meta = path / "reference.yaml"
-    if not meta.is_file():
-        raise RacrSimError(f"{path}: no reference observation (reference.yaml missing)")
-    doc = read_versioned_yaml(meta, format_name=REFERENCE_FORMAT, version=REFERENCE_VERSION, error=RacrSimError,
-                              what="a reference observation", version_key="format_version")
-    if scene is not None and doc.get("scene") != scene:
-        raise RacrSimError(f"{meta}: reference observation of scene {doc.get('scene')!r}, not {scene!r}")
-    z = load_npz(path / str(doc.get("points", "points.npz")), error=RacrSimError, what="the reference cloud")
-    try:
-        pts = np.asarray(z["points_m"], np.float32)
-        inten = np.asarray(z["intensity"], np.float32)
-    except (KeyError, ValueError, TypeError) as exc:
-        raise RacrSimError(f"{path}: cannot read the reference cloud: {exc!r}") from None
-    if pts.ndim != 2 or pts.shape[1] != 3 or inten.shape != (len(pts),) or len(pts) != doc.get("num_points"):
-        raise RacrSimError(f"{path}: reference cloud has shape {pts.shape} / intensity {inten.shape}, expected "
-                           f"({doc.get('num_points')}, 3)")
-    img = cv2.imread(str(path / str(doc.get("image", "image.png"))), cv2.IMREAD_COLOR)
-    if img is None:
-        raise RacrSimError(f"{path}: cannot read the reference image")
-    cam = _camera_from(doc.get("camera"), str(meta))
-    if img.shape[:2] != cam.shape:
-        raise RacrSimError(f"{path}: image {img.shape[:2]} does not match the intrinsics {cam.shape}")
-    return ReferenceObservation(str(doc["scene"]), str(doc.get("lighting", "")), cam,
-                                _from_mat(doc.get("T_ref_camref"), "T_ref_camref"), pts, inten,
-                                cast(NDArray[np.uint8], cv2.cvtColor(img, cv2.COLOR_BGR2RGB)),
-                                str(doc.get("frame_id", "reference")))
 
 
 def _sha256(path: Path) -> str:
@@ -1916,11 +1808,11 @@ def _scene_doc(scene: RacrScene) -> dict[str, Any]:
         "name": scene.spec.name, "kind": scene.spec.kind, "description": scene.description,
         "resolution_m": scene.resolution_m,
         "mesh": {"file": "mesh.ply", "vertices": scene.mesh.num_vertices, "triangles": scene.mesh.num_faces},
-        "camera": _camera_dict(scene.camera),
+        "camera": camera_to_dict(scene.camera),
         "lighting": {k: v.to_dict() for k, v in scene.lightings.items()},
         "initial_offset": {
             "description": "true initial camera pose relative to the reference camera (simulator setup)",
-            "T_camref_cam0": _mat(tr.T_camref_cam0),
+            "T_camref_cam0": matrix_to_list(tr.T_camref_cam0),
             "translation_m": float(np.linalg.norm(tr.T_camref_cam0[:3, 3])),
             "rotation_deg": float(rotation_angle_deg(tr.T_camref_cam0)),
         },
@@ -1930,7 +1822,7 @@ def _scene_doc(scene: RacrScene) -> dict[str, Any]:
         "spec": scene.spec.to_dict(),
         "truth": {
             "note": "simulator truth: rACR must not read this section",
-            "T_cam_hand": _mat(tr.T_cam_hand), "T_world_base": _mat(tr.T_world_base),
+            "T_cam_hand": matrix_to_list(tr.T_cam_hand), "T_world_base": matrix_to_list(tr.T_world_base),
             "vse_scale_m_per_vse": tr.vse_scale_m_per_vse,
         },
     }
@@ -1940,9 +1832,9 @@ def _truth_doc(scene: RacrScene) -> dict[str, Any]:
     tr = scene.truth
     return {
         "format": "lightfast-racr-truth", "format_version": FORMAT_VERSION, "scene": scene.spec.name,
-        "T_world_camref": _mat(tr.T_world_camref), "T_world_cam0": _mat(tr.T_world_cam0),
-        "T_camref_cam0": _mat(tr.T_camref_cam0), "T_world_ref": _mat(tr.T_world_ref),
-        "T_cam_hand": _mat(tr.T_cam_hand), "T_world_base": _mat(tr.T_world_base),
+        "T_world_camref": matrix_to_list(tr.T_world_camref), "T_world_cam0": matrix_to_list(tr.T_world_cam0),
+        "T_camref_cam0": matrix_to_list(tr.T_camref_cam0), "T_world_ref": matrix_to_list(tr.T_world_ref),
+        "T_cam_hand": matrix_to_list(tr.T_cam_hand), "T_world_base": matrix_to_list(tr.T_world_base),
         "vse_scale_m_per_vse": tr.vse_scale_m_per_vse, "target_m": [float(x) for x in tr.target_m],
         "afd": {"grid": list(AFD_GRID), "success_px": AFD_SUCCESS_PX,
                 "pixels_ref": [[float(x) for x in r] for r in tr.afd_pixels_ref],
@@ -1959,9 +1851,9 @@ def write_scene(scene: RacrScene, path: str | os.PathLike[str], *, params_hash: 
     with atomic_directory(path, overwrite=True) as tmp:
         save_ply(scene.mesh, tmp / "mesh.ply")
         write_text_atomic(tmp / "scene.yaml", "# lightfast rACR simulated scene (simulator setup; rACR reads only "
-                                              "reference/)\n" + _dump(_scene_doc(scene)))
+                                              "reference/)\n" + yaml_text(_scene_doc(scene)))
         write_text_atomic(tmp / "truth.yaml", "# lightfast rACR scene truth: evaluation only\n"
-                          + _dump(_truth_doc(scene)))
+                          + yaml_text(_truth_doc(scene)))
         write_reference(scene.reference, tmp / "reference")
         if previews:
             tr = scene.truth
@@ -1970,7 +1862,7 @@ def write_scene(scene: RacrScene, path: str | os.PathLike[str], *, params_hash: 
                                 ("initial_varied", tr.T_world_cam0, "varied")):
                 img = scene.render(T, lt, seed=3).image
                 assert img is not None
-                write_bytes_atomic(tmp / "preview" / f"{name}.png", _png(img))
+                write_bytes_atomic(tmp / "preview" / f"{name}.png", png_bytes(img, error=RacrSimError))
         files = sorted(p for p in tmp.rglob("*") if p.is_file())
         manifest = {
             "format": "lightfast-racr-scene-manifest", "format_version": FORMAT_VERSION,
@@ -2024,15 +1916,17 @@ def load_scene(path: str | os.PathLike[str], *, verify: bool = True) -> RacrScen
     try:
         spec = RacrSceneSpec.from_dict(doc["spec"])
         afd_doc = tdoc["afd"]
+        def mat(x: Any, name: str, shape: tuple[int, ...] = (4, 4)) -> F64:
+            return matrix_from(x, name, shape, error=RacrSimError)
+
         truth = SceneTruth(
-            _from_mat(tdoc["T_world_camref"], "T_world_camref"), _from_mat(tdoc["T_camref_cam0"], "T_camref_cam0"),
-            _from_mat(doc["truth"]["T_cam_hand"], "T_cam_hand"),
-            _from_mat(doc["truth"]["T_world_base"], "T_world_base"),
-            _from_mat(tdoc["T_world_ref"], "T_world_ref"), float(doc["truth"]["vse_scale_m_per_vse"]),
+            mat(tdoc["T_world_camref"], "T_world_camref"), mat(tdoc["T_camref_cam0"], "T_camref_cam0"),
+            mat(doc["truth"]["T_cam_hand"], "T_cam_hand"), mat(doc["truth"]["T_world_base"], "T_world_base"),
+            mat(tdoc["T_world_ref"], "T_world_ref"), float(doc["truth"]["vse_scale_m_per_vse"]),
             np.asarray(afd_doc["points_world"], float).reshape(-1, 3),
-            np.asarray(afd_doc["pixels_ref"], float).reshape(-1, 2), _from_mat(tdoc["target_m"], "target_m", (3,)))
+            np.asarray(afd_doc["pixels_ref"], float).reshape(-1, 2), mat(tdoc["target_m"], "target_m", (3,)))
         lightings = {k: LightingSpec.from_dict(v) for k, v in doc["lighting"].items()}
-        camera = _camera_from(doc["camera"], str(path))
+        camera = camera_from_dict(doc["camera"], str(path), error=RacrSimError)
         platform, vse = PlatformConfig(**doc["platform"]), VseConfig(**doc["vse"])
         resolution = float(doc["resolution_m"])
     except (KeyError, TypeError, ValueError, AttributeError) as exc:

@@ -29,6 +29,7 @@ from sensor_msgs.msg import Image, PointCloud2
 
 from lightfast.config import ConfigError
 from lightfast.geometry import inverse, make_transform, rotation_angle_deg, so3_exp
+from lightfast.racr.reference import load_reference, write_reference
 from lightfast.racr.session import initialization_motions
 from lightfast.ros.convert import (
     matrix_to_pose_stamped,
@@ -44,7 +45,7 @@ from lightfast.ros.racr_msgs import matrix_to_transform_stamped, transform_stamp
 from lightfast.ros.racr_tools import pose7_to_matrix
 from lightfast.ros.spin import spin_until
 from lightfast.sim.racr_live import evaluate_final_pose
-from lightfast.sim.racr_scenes import generate_racr_set, load_reference, load_scene, write_reference
+from lightfast.sim.racr_scenes import generate_racr_set, load_scene
 from lightfast.topics import (
     PLATFORM_BASE_FRAME,
     PLATFORM_HAND_FRAME,

@@ -15,18 +15,17 @@ import yaml
 
 from lightfast import cli
 from lightfast.geometry import inverse, make_transform, rotation_angle_deg, so3_exp, so3_log
+from lightfast.racr.errors import ReferenceFileError
+from lightfast.racr.reference import REFERENCE_FORMAT, load_reference, write_reference
 from lightfast.sim.errors import PlatformError, RacrSimError
 from lightfast.sim.racr_platform import PlatformConfig, PlatformSimulator, VseConfig, motion_duration_s
 from lightfast.sim.racr_scenes import (
-    REFERENCE_FORMAT,
     build_scene,
     camera_for_size,
     generate_racr_set,
-    load_reference,
     load_scene,
     scene_complete,
     scene_specs,
-    write_reference,
     write_scene,
 )
 
@@ -299,29 +298,29 @@ def test_scene_directory_round_trip(indoor, tmp_path: Path) -> None:
 
 
 def test_reference_loader_refuses_bad_input(indoor, tmp_path: Path) -> None:
-    with pytest.raises(RacrSimError, match=r"reference\.yaml missing"):
+    with pytest.raises(ReferenceFileError, match=r"reference\.yaml missing"):
         load_reference(tmp_path / "nothing")
     d = write_reference(indoor.reference, tmp_path / "ref")
     assert load_reference(d, scene="S01").points_m.shape == indoor.reference.points_m.shape
-    with pytest.raises(RacrSimError, match="scene 'S01', not 'S02'"):
+    with pytest.raises(ReferenceFileError, match="scene 'S01', not 'S02'"):
         load_reference(d, scene="S02")
     doc = yaml.safe_load((d / "reference.yaml").read_text())
     doc["format_version"] = 99
     (d / "reference.yaml").write_text(yaml.safe_dump(doc))
-    with pytest.raises(RacrSimError, match="format_version"):
+    with pytest.raises(ReferenceFileError, match="format_version"):
         load_reference(d)
     d2 = write_reference(indoor.reference, tmp_path / "ref2")
     (d2 / "points.npz").write_bytes(b"garbage")
-    with pytest.raises(RacrSimError, match="reference cloud"):
+    with pytest.raises(ReferenceFileError, match="reference cloud"):
         load_reference(d2)
     d3 = write_reference(indoor.reference, tmp_path / "ref3")  # truncated: zipfile raised through racr_node
     data = (d3 / "points.npz").read_bytes()
     (d3 / "points.npz").write_bytes(data[: len(data) // 2])
-    with pytest.raises(RacrSimError, match="reference cloud is damaged or truncated"):
+    with pytest.raises(ReferenceFileError, match="reference cloud is damaged or truncated"):
         load_reference(d3)
     d4 = write_reference(indoor.reference, tmp_path / "ref4")
     (d4 / "reference.yaml").write_text("format: [unclosed\n")
-    with pytest.raises(RacrSimError, match="cannot read a reference observation"):
+    with pytest.raises(ReferenceFileError, match="cannot read a reference observation"):
         load_reference(d4)
 
 

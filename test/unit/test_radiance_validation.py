@@ -6,7 +6,7 @@ from __future__ import annotations
 import pytest
 
 from lightfast.daylight.lighting_map import LightingMapConfig
-from lightfast.daylight.validation import TARGET_MEDIAN, TARGET_R, compare_with_radiance
+from lightfast.eval.radiosity_validation import TARGET_MEDIAN, TARGET_R, compare_with_radiance
 from lightfast.sim.radiance_oracle import radiance_available
 from lightfast.sim.validation_rooms import box_room_with_window
 
