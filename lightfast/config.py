@@ -26,7 +26,7 @@ import os
 import typing
 from collections.abc import Mapping
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, ClassVar, TypeVar
+from typing import TYPE_CHECKING, Any, ClassVar, NamedTuple, TypeVar
 
 import yaml
 
@@ -75,15 +75,25 @@ class FieldSpec:
         """The field holds another configuration (a section of dotted parameters)."""
         return isinstance(self.scalar_type, type) and issubclass(self.scalar_type, Config)
 
+    @property
+    def choices_text(self) -> str:
+        """The allowed values, e.g. ``"a, b"`` (empty: any)."""
+        return "" if self.choices is None else ", ".join(map(str, self.choices))
+
+    @property
+    def range_text(self) -> str:
+        """The inclusive bounds, e.g. ``"[1, inf]"`` (empty: none)."""
+        if self.min is None and self.max is None:
+            return ""
+        return f"[{'-inf' if self.min is None else f'{self.min:g}'}, {'inf' if self.max is None else f'{self.max:g}'}]"
+
     def describe(self) -> str:
-        """The description with the valid values appended, e.g. ``"Chunk size. [1, 100000]"``."""
+        """The description with the valid values appended, e.g. ``"Chunk size. Range [1, 100000]."``."""
         text = self.description
-        if self.choices is not None:
-            text += " One of: " + ", ".join(map(str, self.choices)) + "."
-        if self.min is not None or self.max is not None:
-            lo = "-inf" if self.min is None else f"{self.min:g}"
-            hi = "inf" if self.max is None else f"{self.max:g}"
-            text += f" Range [{lo}, {hi}]."
+        if self.choices_text:
+            text += f" One of: {self.choices_text}."
+        if self.range_text:
+            text += f" Range {self.range_text}."
         return text
 
 
@@ -196,27 +206,40 @@ class Config:
         return {s.name: plain(s, getattr(self, s.name)) for s in field_specs(self)}
 
 
-def leaf_specs(cls: type[Config], prefix: str = "") -> list[tuple[str, FieldSpec]]:
-    """Every non-section field, sections flattened, as ``(dotted name, spec)`` in declaration order."""
-    out: list[tuple[str, FieldSpec]] = []
-    for spec in field_specs(cls):
-        if spec.is_section:
-            out += leaf_specs(spec.scalar_type, f"{prefix}{spec.name}.")
-        else:
-            out.append((prefix + spec.name, spec))
+class Leaf(NamedTuple):
+    """A non-section field of a configuration: dotted name, spec, value, and whether it (or a section holding it)
+    is read-only at run time."""
+
+    name: str
+    spec: FieldSpec
+    value: Any
+    read_only: bool
+
+
+def leaves(config: Config) -> list[Leaf]:
+    """Every non-section field of ``config``, sections flattened, in declaration order."""
+    out: list[Leaf] = []
+
+    def walk(c: Config, prefix: str, read_only: bool) -> None:
+        for spec in field_specs(c):
+            value = getattr(c, spec.name)
+            if spec.is_section:
+                walk(value, f"{prefix}{spec.name}.", read_only or spec.read_only)
+            else:
+                out.append(Leaf(prefix + spec.name, spec, value, read_only or spec.read_only))
+
+    walk(config, "", False)
     return out
 
 
-def leaf_values(config: Config, prefix: str = "") -> dict[str, Any]:
+def leaf_specs(cls: type[Config]) -> list[tuple[str, FieldSpec]]:
+    """``(dotted name, spec)`` of every non-section field of ``cls``."""
+    return [(leaf.name, leaf.spec) for leaf in leaves(cls())]
+
+
+def leaf_values(config: Config) -> dict[str, Any]:
     """``{dotted name: value}`` of every non-section field of ``config``."""
-    out: dict[str, Any] = {}
-    for spec in field_specs(config):
-        value = getattr(config, spec.name)
-        if spec.is_section:
-            out.update(leaf_values(value, f"{prefix}{spec.name}."))
-        else:
-            out[prefix + spec.name] = value
-    return out
+    return {leaf.name: leaf.value for leaf in leaves(config)}
 
 
 def _split(cls: type[Config], values: Mapping[str, Any]) -> tuple[dict[str, Any], dict[str, dict[str, Any]],
@@ -329,27 +352,14 @@ def config_markdown(cls: type[Config]) -> str:
     """A markdown table of every parameter of ``cls`` (sections as dotted names): name, type, default, valid
     values, whether it can change at run time, description."""
     rows = ["| parameter | type | default | valid values | at run time | description |", "|---|---|---|---|---|---|"]
-
-    def walk(config: Config, prefix: str, read_only: bool) -> None:
-        for spec in field_specs(config):
-            value = getattr(config, spec.name)
-            if spec.is_section:
-                walk(value, f"{prefix}{spec.name}.", read_only or spec.read_only)
-                continue
-            kind = f"{spec.scalar_type.__name__}[]" if spec.is_tuple else spec.scalar_type.__name__
-            valid = []
-            if spec.choices is not None:
-                valid.append(", ".join(map(str, spec.choices)))
-            if spec.min is not None or spec.max is not None:
-                lo = "-inf" if spec.min is None else f"{spec.min:g}"
-                hi = "inf" if spec.max is None else f"{spec.max:g}"
-                valid.append(f"[{lo}, {hi}]")
-            default = _yaml_scalar(list(value) if spec.is_tuple else value)
-            fixed = "read-only" if read_only or spec.read_only else "yes"
-            text = spec.description.replace("|", "\\|")
-            rows.append(f"| `{prefix}{spec.name}` | {kind} | `{default}` | {'; '.join(valid)} | {fixed} | {text} |")
-
-    walk(cls(), "", False)
+    for leaf in leaves(cls()):
+        spec = leaf.spec
+        kind = f"{spec.scalar_type.__name__}[]" if spec.is_tuple else spec.scalar_type.__name__
+        valid = "; ".join(filter(None, (spec.choices_text, spec.range_text)))
+        default = _yaml_scalar(list(leaf.value) if spec.is_tuple else leaf.value)
+        text = spec.description.replace("|", "\\|")
+        rows.append(f"| `{leaf.name}` | {kind} | `{default}` | {valid} | {'read-only' if leaf.read_only else 'yes'} "
+                    f"| {text} |")
     return "\n".join(rows) + "\n"
 
 

@@ -17,7 +17,7 @@ from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValu
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
-from lightfast.config import Config, ConfigError, FieldSpec, config_from_mapping, field_specs, replace_config
+from lightfast.config import Config, ConfigError, FieldSpec, config_from_mapping, leaf_specs, leaves, replace_config
 
 C = TypeVar("C", bound=Config)
 
@@ -33,23 +33,6 @@ _SCALAR_TYPES = {
     float: Parameter.Type.DOUBLE,
     str: Parameter.Type.STRING,
 }
-
-
-def _leaves(cls: type[C]) -> list[tuple[str, FieldSpec, Any, bool]]:
-    """``(dotted name, spec, default, read_only)`` of every parameter of ``cls``: a section's fields are dotted
-    parameters whose defaults are the section default's values, read-only when the section is."""
-    out = []
-
-    def walk(config_cls: type, default: Any, prefix: str, read_only: bool) -> None:
-        for spec in field_specs(config_cls):
-            value = getattr(default, spec.name) if default is not None else spec.default
-            if spec.is_section:
-                walk(spec.scalar_type, value, f"{prefix}{spec.name}.", read_only or spec.read_only)
-            else:
-                out.append((prefix + spec.name, spec, value, read_only or spec.read_only))
-
-    walk(cls, None, "", False)
-    return out
 
 
 def _descriptor(spec: FieldSpec, read_only: bool = False) -> ParameterDescriptor:
@@ -80,7 +63,7 @@ def declare_config(node: Node, cls: type[C]) -> C:
     Raises :class:`~lightfast.config.ConfigError` naming the parameter when a value is invalid.
     """
     values = {}
-    for name, spec, value, read_only in _leaves(cls):
+    for name, spec, value, read_only in leaves(cls()):
         default = list(value) if spec.is_tuple else value
         descriptor = _descriptor(spec, read_only)
         try:
@@ -123,7 +106,7 @@ class ConfigParameters(Generic[C]):
             unknown = "; ".join(_unknown_text(n, c) for n, c in unknown_parameters(node).items())
             raise ConfigError(f"{exc}" + (f" ({unknown})" if unknown else "")) from None
         report_unknown_parameters(node)
-        self._specs = {name: spec for name, spec, _, _ in _leaves(cls)}
+        self._specs = dict(leaf_specs(cls))
         self.on_change = on_change
         node.add_on_set_parameters_callback(self._validate)
         node.add_post_set_parameters_callback(self._apply)
