@@ -31,6 +31,19 @@ SHUTDOWN_GRACE_S = 5.0
 
 
 @contextmanager
+def _exit_if_stuck(grace_s: float) -> Iterator[None]:
+    """A teardown: the work is done, so if the block hangs (destroying a node has been seen to) longer than
+    ``grace_s``, the process exits (code 3) rather than live on."""
+    watchdog = threading.Timer(grace_s, os._exit, args=(3,))
+    watchdog.daemon = True
+    watchdog.start()
+    try:
+        yield
+    finally:
+        watchdog.cancel()
+
+
+@contextmanager
 def ros_session(
     node_name: str,
     *,
@@ -61,16 +74,13 @@ def ros_session(
         executor.add_node(node)
         yield node, executor
     finally:
-        watchdog = threading.Timer(shutdown_grace_s, os._exit, args=(3,))
-        watchdog.daemon = True
-        watchdog.start()
-        try:
-            executor.shutdown(timeout_sec=1.0)
-            if node is not None:
-                node.destroy_node()
-        finally:
-            rclpy.try_shutdown(context=context)
-            watchdog.cancel()
+        with _exit_if_stuck(shutdown_grace_s):
+            try:
+                executor.shutdown(timeout_sec=1.0)
+                if node is not None:
+                    node.destroy_node()
+            finally:
+                rclpy.try_shutdown(context=context)
 
 
 def message_class(msgtype: str) -> type:
@@ -170,14 +180,10 @@ def run_node(make_node: Callable[[], Node], name: str, args: list[str] | None = 
         if rclpy.ok():  # a real error; after a signal the wait set may fail on the shut-down context instead
             raise
     finally:
-        # the node's work is over: a teardown that hangs (seen in destroy_node) must not keep the process alive
-        watchdog = threading.Timer(SHUTDOWN_GRACE_S, os._exit, args=(3,))
-        watchdog.daemon = True
-        watchdog.start()
-        if executor is not None:
-            executor.shutdown(timeout_sec=1.0)
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-        watchdog.cancel()
+        with _exit_if_stuck(SHUTDOWN_GRACE_S):
+            if executor is not None:
+                executor.shutdown(timeout_sec=1.0)
+            if node is not None:
+                node.destroy_node()
+            rclpy.try_shutdown()
     return 0

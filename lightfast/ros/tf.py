@@ -1,8 +1,8 @@
-"""Poses as TF: transforms on ``/tf`` (and ``/tf_static``) as ``tf2_ros.TransformBroadcaster`` sends them.
+"""Poses as TF: transforms on ``/tf`` as ``tf2_ros.TransformBroadcaster`` sends them.
 
 tf2_ros has no wheel here, and tf2_msgs neither: ``scripts/setup.sh`` builds tf2_msgs' one interface with the
 rosidl toolchain from PyPI (a real Jazzy install has it). When ``tf2_msgs`` cannot be imported, a
-:class:`TransformBroadcaster` says so once in the node's log and sends nothing; :attr:`available` tells.
+:class:`TransformBroadcaster` says so once in the node's log and sends nothing.
 """
 from __future__ import annotations
 
@@ -14,15 +14,12 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 
 from lightfast.ros.convert import make_header, matrix_to_pose
 
-__all__ = ["TF_QOS", "TF_STATIC_QOS", "TF_STATIC_TOPIC", "TF_TOPIC", "TransformBroadcaster", "transform_stamped"]
+__all__ = ["TF_QOS", "TF_TOPIC", "TransformBroadcaster", "transform_stamped"]
 
 TF_TOPIC = "/tf"
-TF_STATIC_TOPIC = "/tf_static"
-#: tf2_ros' QoS: /tf reliable, volatile, depth 100; /tf_static latched.
+#: tf2_ros' QoS of /tf: reliable, volatile, depth 100.
 TF_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100, reliability=ReliabilityPolicy.RELIABLE,
                     durability=DurabilityPolicy.VOLATILE)
-TF_STATIC_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                           durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
 def transform_stamped(T_parent_child: ArrayLike, *, stamp_ns: int, parent_frame: str, child_frame: str) -> Any:
@@ -37,9 +34,9 @@ def transform_stamped(T_parent_child: ArrayLike, *, stamp_ns: int, parent_frame:
 
 
 class TransformBroadcaster:
-    """Sends transforms on ``/tf`` (or latched on ``/tf_static`` with ``static=True``) from ``node``."""
+    """Sends transforms on ``/tf`` from ``node``."""
 
-    def __init__(self, node: Node, *, static: bool = False) -> None:
+    def __init__(self, node: Node) -> None:
         try:
             from tf2_msgs.msg import TFMessage
         except ImportError:
@@ -49,12 +46,7 @@ class TransformBroadcaster:
                                       "on a real ROS 2 install it comes with ros-jazzy-tf2-msgs)")
             return
         self._message = TFMessage
-        self._publisher = node.create_publisher(TFMessage, TF_STATIC_TOPIC if static else TF_TOPIC,
-                                                TF_STATIC_QOS if static else TF_QOS)
-
-    @property
-    def available(self) -> bool:
-        return self._publisher is not None
+        self._publisher = node.create_publisher(TFMessage, TF_TOPIC, TF_QOS)
 
     def send(self, *transforms: Any) -> None:
         """Publish ``TransformStamped`` messages (one TFMessage)."""
