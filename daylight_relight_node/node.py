@@ -43,7 +43,7 @@ from lightfast.daylight.lighting_map import LightingMap
 from lightfast.daylight.relight import DaylightRelighter, Reference, RelightConfig
 from lightfast.daylight.sun_update import SunEpochAssembler
 from lightfast.errors import LightfastError
-from lightfast.ros.clock import on_time_jump_back
+from lightfast.ros.clock import ClockJumpLatch
 from lightfast.ros.convert import (
     CameraInfoReader,
     image_to_rgb,
@@ -128,10 +128,9 @@ class DaylightRelightNode(LightfastNode[RelightConfig]):
         self.stats |= {"frames_in": 0, "poses_in": 0, "references": 0, "dropped_behind": 0, "dropped_unpaired": 0,
                       "waiting_for_sun": 0, "bad_inputs": 0, "chunks": 0, "dropped_epochs": 0, "time_jumps": 0}
         self._guard = StampGuard(cfg)  # stamps of the paired frames (worker only)
-        self._clock_jump: int | None = None  # the node clock after it jumped back, until the worker sees it
         self._dropped_epochs: set[int] = set()  # sun epochs already reported as dropped (one line each)
         self._last: dict[str, Any] = {}
-        self._status = (Level.WARN, "waiting for the first complete sun epoch")
+        self.last_status = (Level.WARN, "waiting for the first complete sun epoch")
 
         self.color_pub = self.create_publisher(Image, REFERENCE_COLOR_TOPIC, OUTPUT_QOS)
         self.depth_pub = self.create_publisher(Image, REFERENCE_DEPTH_TOPIC, OUTPUT_QOS)
@@ -142,7 +141,7 @@ class DaylightRelightNode(LightfastNode[RelightConfig]):
         self.create_subscription(CameraInfo, COLOR_INFO_TOPIC, self._on_camera_info, sensor)
         self.create_subscription(PoseStamped, COARSE_POSE_TOPIC, self._on_pose, OUTPUT_QOS)
         self.create_subscription(PointCloud2, SUN_CHUNK_TOPIC, self._on_chunk, CHUNK_QOS)
-        self._jump_handle = on_time_jump_back(self, cfg.time_jump_back_s, self._on_clock_jump)
+        self._clock_jumps = ClockJumpLatch(self, cfg.time_jump_back_s, wake=lambda: self._worker.wake())
         self.status_timer = self.create_timer(STATUS_PERIOD_S, self._heartbeat)
         self._worker = StepWorker("relight", self._work_once, self._on_step_error)
         self.get_logger().info(
@@ -161,7 +160,6 @@ class DaylightRelightNode(LightfastNode[RelightConfig]):
 
     def publish_status(self, level: Level, message: str, values: Mapping[str, Any] | None = None, *,
                        stamp_ns: int | None = None) -> None:
-        self._status = (level, message)  # the heartbeat repeats it
         # stamp_ns: the frame this status is about (None: not about a frame)
         super().publish_status(level, message, {"stamp_ns": stamp_ns, **(values or {})}, stamp_ns=stamp_ns)
 
@@ -177,7 +175,7 @@ class DaylightRelightNode(LightfastNode[RelightConfig]):
             progress = f" (epoch {a.pending_epoch_ns} at {100 * a.progress:.0f}%)" if a.pending_epoch_ns else ""
             self.problems.report("waiting", f"no reference yet: waiting for the first complete sun epoch on "
                                  f"{SUN_CHUNK_TOPIC}{progress}", Level.OK)
-        self.publish_status(*self._status)
+        self.publish_status(*self.last_status)
 
     # ---------------------------------------------------------------------------------------------- inputs
 
@@ -273,11 +271,6 @@ class DaylightRelightNode(LightfastNode[RelightConfig]):
             self.get_logger().warning(f"dropped sun epoch {epoch}: {why}")
         return False
 
-    def _on_clock_jump(self, now_ns: int, jump_ns: int) -> None:
-        with self._lock:
-            self._clock_jump = now_ns
-        self._worker.wake()
-
     def _time_jumped(self, why: str) -> None:
         """(Worker, under the input lock.) Time went back: the scale average restarts and the next complete sun
         epoch is taken whatever its time (the B̂_sun in use stays until then)."""
@@ -308,7 +301,7 @@ class DaylightRelightNode(LightfastNode[RelightConfig]):
         with self._lock:
             new_sun, self._new_sun = self._new_sun, None
             new_config, self._new_config = self._new_config, None
-            clock_jump, self._clock_jump = self._clock_jump, None
+            clock_jump = self._clock_jumps.take()
             frame = self._queue.popleft() if self._queue else None
             camera = self._camera
             more = bool(self._queue)

@@ -11,8 +11,11 @@ from dataclasses import dataclass
 
 from lightfast.config import Config, param
 
-__all__ = ["SENSOR_RELIABILITIES", "SensorInputOptions", "StampOptions"]
+__all__ = ["SENSOR_RELIABILITIES", "TIME_JUMP_BACK_S", "SensorInputOptions", "StampOptions"]
 
+#: Time going back by more than this (s) counts as a jump (a bag played again): the default of ``time_jump_back_s``,
+#: and the threshold of the nodes without input stamps to check (the sun update, rACR).
+TIME_JUMP_BACK_S = 1.0
 #: Values of ``sensor_reliability``.
 SENSOR_RELIABILITIES = ("best_effort", "reliable")
 
@@ -44,7 +47,7 @@ class StampOptions(Config):
         "two hosts out of sync, a bogus stamp); 0 turns the check off.",
     )
     time_jump_back_s: float = param(
-        1.0, min=0.0, max=86_400.0,
+        TIME_JUMP_BACK_S, min=0.0, max=86_400.0,
         description="ROS time, or the stamps of the input, going back by more than this (a bag replayed again or "
         "looped, a restarted simulation) resets the node's time-dependent state with a log line; input stamped "
         "less far before the previous one is dropped as out of order.",

@@ -66,6 +66,7 @@ from lightfast.camera import PinholeCamera
 from lightfast.config import ConfigError
 from lightfast.errors import LightfastError
 from lightfast.geometry import matrix_to_quat, rotation_angle_deg
+from lightfast.node_options import TIME_JUMP_BACK_S
 from lightfast.racr.errors import RacrError
 from lightfast.racr.node_config import RacrNodeConfig
 from lightfast.racr.reference import ReferenceObservation, load_reference
@@ -110,8 +111,6 @@ from lightfast.topics import (
 NODE_NAME = "racr_node"
 STAGE_NO_REFERENCE = "no_reference"
 #: Keyframe topics: every keyframe of an observation must fit into the queue.
-#: A clock step back larger than this restarts the relocalization (ROS time only goes back on sim time).
-TIME_JUMP_BACK_S = 1.0
 KEYFRAME_QOS = QoSProfile(depth=32, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
 #: Buffered VSE poses (by stamp) and keyframe halves (by stamp and frame) waiting for their clouds.
 MAX_POSES = 64

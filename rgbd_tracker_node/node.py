@@ -41,7 +41,7 @@ from nav_msgs.msg import Odometry
 from sensor_msgs.msg import CameraInfo, Image
 
 from lightfast.camera import PinholeCamera
-from lightfast.ros.clock import on_time_jump_back
+from lightfast.ros.clock import ClockJumpLatch
 from lightfast.ros.convert import (
     CameraInfoReader,
     image_to_numpy,
@@ -142,7 +142,6 @@ class RGBDTrackerNode(LightfastNode[TrackerConfig]):
         self._read_camera_info = CameraInfoReader()
         self._reset: tuple[np.ndarray, int | None, str] | None = None
         self._guard = StampGuard(cfg)  # stamps of the live frames (f2f worker only)
-        self._clock_jump: int | None = None  # the node clock after it jumped back, until the f2f worker sees it
         self._announce_start = True  # log where tracking starts at the next first frame
         self._new_config: TrackerConfig | None = None
         self.params.on_change = self._on_config
@@ -163,7 +162,7 @@ class RGBDTrackerNode(LightfastNode[TrackerConfig]):
         sub(Image, REFERENCE_DEPTH_TOPIC, self._on_ref_depth, OUTPUT_QOS)
         sub(PoseStamped, TRACKER_RESET_TOPIC, self._on_reset, OUTPUT_QOS)
         sub(PoseWithCovarianceStamped, INITIAL_POSE_TOPIC, self._on_initial_pose, OUTPUT_QOS)
-        self._jump_handle = on_time_jump_back(self, cfg.time_jump_back_s, self._on_clock_jump)
+        self._clock_jumps = ClockJumpLatch(self, cfg.time_jump_back_s, wake=lambda: self._f2f_worker.wake())
         self._f2f_worker = StepWorker("tracker-f2f", self._work, self._on_step_error,
                                       period_s=lambda: self._deadline_period(self.config))
         self._f2m_worker = StepWorker("tracker-f2m", self._refine_work, self._on_step_error)
@@ -268,11 +267,6 @@ class RGBDTrackerNode(LightfastNode[TrackerConfig]):
             self._reset = (T, stamp or None, topic)
         self._f2f_worker.wake()
 
-    def _on_clock_jump(self, now_ns: int, jump_ns: int) -> None:
-        with self._lock:
-            self._clock_jump = now_ns
-        self._f2f_worker.wake()
-
     def _on_config(self, cfg: TrackerConfig) -> None:
         with self._lock:
             self._new_config = cfg
@@ -293,7 +287,7 @@ class RGBDTrackerNode(LightfastNode[TrackerConfig]):
         with self._lock:
             new_config, self._new_config = self._new_config, None
             reset, self._reset = self._reset, None
-            clock_jump, self._clock_jump = self._clock_jump, None
+            clock_jump = self._clock_jumps.take()
             frame = self._frames.popleft() if self._frames else None
             camera = self._camera
             more = bool(self._frames)

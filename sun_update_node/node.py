@@ -22,6 +22,7 @@ from lightfast.daylight.lighting_map import LightingMap
 from lightfast.daylight.sun import Site
 from lightfast.daylight.sun_update import SunChunk, SunUpdateConfig, SunUpdatePipeline
 from lightfast.errors import LightfastError
+from lightfast.node_options import TIME_JUMP_BACK_S
 from lightfast.ros.clock import on_time_jump_back
 from lightfast.ros.convert import make_header, numpy_to_pointcloud2
 from lightfast.ros.node import LightfastNode
@@ -29,9 +30,6 @@ from lightfast.ros.qos import LATCHED_QOS, OUTPUT_QOS
 from lightfast.ros.runtime import run_node
 from lightfast.topics import SUN_CHUNK_TOPIC, SUN_DIRECTION_TOPIC
 
-#: A clock step back larger than this restarts the sun update (ROS time only goes back on sim time: a bag played
-#: again or looped); the sun moves 0.004 deg per second, so smaller steps do not matter.
-TIME_JUMP_BACK_S = 1.0
 NODE_NAME = "sun_update_node"
 CHUNK_DTYPE = np.dtype([("vertex", "<u4"), ("r", "<f4"), ("g", "<f4"), ("b", "<f4")])
 

@@ -65,7 +65,6 @@ import sys
 import threading
 import time
 from collections import deque
-from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -81,7 +80,7 @@ from std_srvs.srv import Trigger
 from lightfast.config import ConfigError
 from lightfast.errors import InputError, LightfastError
 from lightfast.geometry import inverse, so3_log
-from lightfast.ros.clock import on_time_jump_back
+from lightfast.ros.clock import ClockJumpLatch
 from lightfast.ros.convert import (
     image_to_rgb,
     make_header,
@@ -200,10 +199,9 @@ class VtrLocalizerNode(LightfastNode[VtrLocalizerConfig]):
         self._T_odom_cam = np.eye(4)
         self._last_stamp_ns: int | None = None
         self._guard = StampGuard(cfg)  # stamps of the stereo pairs (worker only)
-        self._clock_jump: int | None = None  # the node clock after it jumped back, until the worker sees it
         self.stats |= {"frames_in": 0, "frames_done": 0, "dropped_behind": 0, "dropped_unpaired": 0,
                       "ignored": 0, "time_jumps": 0}
-        self._status: tuple[Level, str] = (Level.OK, "waiting for stereo pairs")
+        self.last_status = (Level.OK, "waiting for stereo pairs")
 
         inputs = MutuallyExclusiveCallbackGroup()
         work = MutuallyExclusiveCallbackGroup()
@@ -218,7 +216,7 @@ class VtrLocalizerNode(LightfastNode[VtrLocalizerConfig]):
                                      callback_group=inputs)
             self.create_subscription(CameraInfo, info_topic, functools.partial(self._on_info, side=side), sensor,
                                      callback_group=inputs)
-        self._jump_handle = on_time_jump_back(self, cfg.time_jump_back_s, self._on_clock_jump)
+        self._clock_jumps = ClockJumpLatch(self, cfg.time_jump_back_s, wake=lambda: self.work_trigger.trigger())
         self.work_trigger = self.create_guard_condition(self._work, callback_group=work)
         self.finish_service = self.create_service(Trigger, VTR_FINISH_TEACH_SERVICE, self._on_finish,
                                                   callback_group=work)
@@ -248,11 +246,6 @@ class VtrLocalizerNode(LightfastNode[VtrLocalizerConfig]):
                  count: bool = True) -> None:
         self.problem(key, text, level, stamp_ns=stamp_ns, values={"stamp_ns": stamp_ns, "problem": key}, count=count)
 
-    def publish_status(self, level: Level, message: str, values: Mapping[str, Any] | None = None, *,
-                       stamp_ns: int | None = None) -> None:
-        self._status = (level, message)  # the heartbeat repeats it
-        super().publish_status(level, message, values, stamp_ns=stamp_ns)
-
     def status_values(self) -> dict[str, Any]:
         cfg = self.config
         common: dict[str, Any] = {"mode": cfg.mode, "map_path": str(self.map_path)}
@@ -269,7 +262,7 @@ class VtrLocalizerNode(LightfastNode[VtrLocalizerConfig]):
     def _heartbeat(self) -> None:
         if self.config.mode == "repeat" and self.repeat is None:
             self._load_map()
-        self.publish_status(*self._status)
+        self.publish_status(*self.last_status)
         if self._frames:
             self.work_trigger.trigger()  # pairs that waited for camera_info in vain are reported now
 
@@ -336,11 +329,6 @@ class VtrLocalizerNode(LightfastNode[VtrLocalizerConfig]):
 
     # ---------------------------------------------------------------------------------------------- worker
 
-    def _on_clock_jump(self, now_ns: int, jump_ns: int) -> None:
-        with self._lock:
-            self._clock_jump = now_ns
-        self.work_trigger.trigger()
-
     def _stamp_ok(self, f: _Frame) -> bool:
         """Refuse a pair stamped ahead of the clock or out of order; when the stamps went back, a repeat starts
         over (a teach refuses pairs from before its newest: it would teach the route twice)."""
@@ -373,8 +361,7 @@ class VtrLocalizerNode(LightfastNode[VtrLocalizerConfig]):
                                   "the whole map, the VO chain at its origin")
 
     def _work(self) -> None:
-        with self._lock:
-            clock_jump, self._clock_jump = self._clock_jump, None
+        clock_jump = self._clock_jumps.take()
         if clock_jump is not None and self.teach is None and self._guard.clock_jumped_back(clock_jump):
             self._time_jumped(f"ROS time jumped back to {clock_jump * 1e-9:.3f} s")
         with self._lock:

@@ -2,13 +2,14 @@
 a restarted simulation), through rcl's time-jump mechanism (as tf2's buffer clears itself on it)."""
 from __future__ import annotations
 
+import threading
 from collections.abc import Callable
 
 from rclpy.clock import JumpHandle, JumpThreshold, TimeJump
 from rclpy.duration import Duration
 from rclpy.node import Node
 
-__all__ = ["on_time_jump_back"]
+__all__ = ["ClockJumpLatch", "on_time_jump_back"]
 
 
 def on_time_jump_back(node: Node, threshold_s: float, callback: Callable[[int, int], None]) -> JumpHandle:
@@ -23,3 +24,25 @@ def on_time_jump_back(node: Node, threshold_s: float, callback: Callable[[int, i
         callback(clock.now().nanoseconds, jump.delta.nanoseconds)
 
     return clock.create_jump_callback(threshold, post_callback=post)
+
+
+class ClockJumpLatch:
+    """The node clock's latest jump back, kept for a worker thread: the jump callback (in the thread that sets the
+    clock) stores the new time and calls ``wake``; the worker :meth:`take` s it between two steps."""
+
+    def __init__(self, node: Node, threshold_s: float, wake: Callable[[], None]) -> None:
+        self._lock = threading.Lock()
+        self._now_ns: int | None = None
+        self._wake = wake
+        self._handle = on_time_jump_back(node, threshold_s, self._on_jump)
+
+    def _on_jump(self, now_ns: int, jump_ns: int) -> None:
+        with self._lock:
+            self._now_ns = now_ns
+        self._wake()
+
+    def take(self) -> int | None:
+        """The node clock after its latest jump back since the last call, or ``None``."""
+        with self._lock:
+            now_ns, self._now_ns = self._now_ns, None
+        return now_ns

@@ -37,6 +37,8 @@ class LightfastNode(Node, Generic[C]):
         self.status_pub: Publisher | None = (
             self.create_publisher(DiagnosticArray, status_topic, OUTPUT_QOS) if status_topic else None)
         self._ready_pub: Publisher | None = None
+        #: the latest status (level, message): a heartbeat repeats it
+        self.last_status: tuple[Level, str] = (Level.OK, "starting")
 
     def log(self, level: Level, text: str) -> None:
         """A log line at the severity of a status level."""
@@ -54,6 +56,7 @@ class LightfastNode(Node, Generic[C]):
                        stamp_ns: int | None = None) -> None:
         """One status: :meth:`status_values` and ``values`` (which win), stamped ``stamp_ns`` (the input it is
         about) or now."""
+        self.last_status = (level, message)
         if self.status_pub is None:
             return
         stamp = self.now_ns() if stamp_ns is None else stamp_ns
