@@ -1,4 +1,4 @@
-"""Benchmark the ground-truth daylight renderer (:mod:`lightfast.sim.gt_renderer`) on the DS1 and DS2 scenes.
+"""Benchmark the ground-truth daylight renderer (:mod:`lightfast.sim.daylight.renderer`) on the DS1 and DS2 scenes.
 
 For each scene (default resolution, the sequence's default cache settings) and the lighting of one clear
 sequence (DS1.T2 / DS2.T2, at its start time):
@@ -27,15 +27,11 @@ from pathlib import Path
 import numpy as np
 
 from lightfast.io import write_text_atomic
-from lightfast.sim.daylight_recordings import (
-    DEFAULT_CACHE,
-    SEQUENCES,
-    camera_for_size,
-    hand_held_trajectory,
-    sky_states,
-)
-from lightfast.sim.daylight_scene import make_scene
-from lightfast.sim.gt_renderer import CameraResponse, DepthSensor, GroundTruthRenderer
+from lightfast.sim.daylight.renderer import GroundTruthRenderer
+from lightfast.sim.daylight.rooms import make_scene
+from lightfast.sim.daylight.sensors import CameraResponse, DepthSensor
+from lightfast.sim.daylight.sequences import DEFAULT_CACHE, SEQUENCES, camera_for_size, sky_states
+from lightfast.sim.daylight.trajectory import hand_held_trajectory
 
 DEFAULT_OUTPUT = Path(__file__).resolve().parent / "results" / "daylight_render.md"
 

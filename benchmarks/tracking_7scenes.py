@@ -12,7 +12,7 @@ same run:
   odometry tutorial; the issue's "about 2.5 cm" reference), frame to frame;
 * **Open3D hybrid, w_G = 10** — the same tensor-API call with the depth scaled by ``s = sqrt(10)`` (and
   ``depth_huber_delta``, ``depth_outlier_trunc``, ``depth_max`` scaled by ``s``, translation divided by ``s``), which
-  turns its cost into ``E_I + 10 E_D`` (see the module docstring of :mod:`lightfast.tracking.rgbd_odometry`).
+  turns its cost into ``E_I + 10 E_D`` (see docs/daylight.md, "Direct RGB-D tracking").
 
 The same four main runs again on colour images registered to depth by the shift
 :func:`lightfast.data.sevenscenes.colour_offset` estimates from the images alone (no ground truth): the Kinect

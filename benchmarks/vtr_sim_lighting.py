@@ -36,18 +36,12 @@ sys.path.insert(0, str(ROOT))
 
 from lightfast.daylight.sun import sun_position  # noqa: E402
 from lightfast.io import write_text_atomic  # noqa: E402
-from lightfast.sim.vtr_recordings import DEFAULT_RUNS, MET_SITE, TABLE_I  # noqa: E402
-from lightfast.sim.vtr_route import (  # noqa: E402
-    AutoExposure,
-    RouteConfig,
-    RouteScene,
-    SensorModel,
-    SpectralRenderer,
-    StereoRig,
-    base_pose,
-    build_route_scene,
-    daylight_illumination,
-)
+from lightfast.sim.vtr.build import build_route_scene  # noqa: E402
+from lightfast.sim.vtr.camera import AutoExposure, SensorModel, StereoRig  # noqa: E402
+from lightfast.sim.vtr.light import daylight_illumination  # noqa: E402
+from lightfast.sim.vtr.recordings import DEFAULT_RUNS, MET_SITE, TABLE_I  # noqa: E402
+from lightfast.sim.vtr.renderer import SpectralRenderer  # noqa: E402
+from lightfast.sim.vtr.scene import RouteConfig, RouteScene, base_pose  # noqa: E402
 from lightfast.vtr import FeatureExtractor, RepeatConfig, StereoConfig, image_sources, match_descriptors  # noqa: E402
 
 RESULTS = ROOT / "benchmarks" / "results"

@@ -45,8 +45,8 @@ from lightfast.ros.params import ConfigParameters
 from lightfast.ros.qos import OUTPUT_QOS
 from lightfast.ros.racr_msgs import transform_stamped_to_matrix
 from lightfast.ros.runtime import run_node
+from lightfast.sim.racr import load_scene
 from lightfast.sim.racr_live import RacrPlatformSimConfig, TimedPlatform
-from lightfast.sim.racr_scenes import load_scene
 from lightfast.topics import (
     PLATFORM_BASE_FRAME,
     PLATFORM_HAND_FRAME,

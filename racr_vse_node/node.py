@@ -48,9 +48,9 @@ from lightfast.ros.params import ConfigParameters
 from lightfast.ros.qos import OUTPUT_QOS
 from lightfast.ros.racr_msgs import matrix_to_transform_stamped
 from lightfast.ros.runtime import run_node
+from lightfast.sim.racr import load_scene
 from lightfast.sim.racr_live import RacrVseSimConfig
 from lightfast.sim.racr_platform import VseObservation
-from lightfast.sim.racr_scenes import load_scene
 from lightfast.topics import (
     SIM_CAMERA_POSE_TOPIC,
     VSE_CAMERA_INFO_TOPIC,

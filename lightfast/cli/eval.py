@@ -103,7 +103,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     from lightfast.eval import daylight, recording
     from lightfast.eval.racr import METHODS as RACR_METHODS
     from lightfast.eval.racr import RacrEvalConfig
-    from lightfast.vtr.repeat import MODES
+    from lightfast.vtr.repeat_config import MODES
 
     ev = subparsers.add_parser(NAME, help=HELP)
     ev_sub = ev.add_subparsers(dest="eval_command", required=True, metavar="EVALUATION")

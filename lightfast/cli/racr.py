@@ -12,7 +12,7 @@ def _cmd_racr_wait(args: argparse.Namespace) -> int:
     """Exit 0 when converged; 1 when not (timeout, failed stage, a --pid process exited); 130 on Ctrl-C."""
     from lightfast.ros.racr_tools import score_run, wait_converged
     from lightfast.ros.runtime import ros_session
-    from lightfast.sim.racr_scenes import load_scene
+    from lightfast.sim.racr import load_scene
 
     scene = load_scene(args.scene)
     with ros_session("racr_wait") as (node, executor):

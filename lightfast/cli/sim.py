@@ -13,7 +13,7 @@ log = logging.getLogger(__name__)
 
 
 def _cmd_sim_daylight(args: argparse.Namespace) -> int:
-    from lightfast.sim.daylight_recordings import generate_daylight_set
+    from lightfast.sim.daylight.recordings import generate_daylight_set
 
     if args.frames < 1:
         args.parser.error("--frames must be >= 1")
@@ -27,7 +27,7 @@ def _cmd_sim_daylight(args: argparse.Namespace) -> int:
 
 
 def _cmd_sim_racr(args: argparse.Namespace) -> int:
-    from lightfast.sim.racr_scenes import generate_racr_set
+    from lightfast.sim.racr import generate_racr_set
 
     if args.scenes is not None and not 1 <= args.scenes <= 20:
         args.parser.error("--scenes must be in 1..20")
@@ -45,8 +45,9 @@ def _cmd_sim_racr(args: argparse.Namespace) -> int:
 def _cmd_sim_vtr(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
-    from lightfast.sim.vtr_recordings import DriveConfig, generate_vtr_set, load_schedule
-    from lightfast.sim.vtr_route import RouteConfig, StereoRig
+    from lightfast.sim.vtr.camera import StereoRig
+    from lightfast.sim.vtr.recordings import DriveConfig, generate_vtr_set, load_schedule
+    from lightfast.sim.vtr.scene import RouteConfig
 
     if args.schedule and args.runs:
         args.parser.error("give --runs or --schedule, not both")
@@ -70,10 +71,10 @@ def _cmd_sim_vtr(args: argparse.Namespace) -> int:
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
     """``lightfast sim`` and its simulators (imports their modules for the choices and defaults)."""
-    from lightfast.sim.daylight_recordings import SEQUENCES
-    from lightfast.sim.racr_scenes import DEFAULT_RESOLUTION_M
-    from lightfast.sim.vtr_recordings import DEFAULT_RUNS, TABLE_I
-    from lightfast.sim.vtr_route import RouteConfig
+    from lightfast.sim.daylight.sequences import SEQUENCES
+    from lightfast.sim.racr import DEFAULT_RESOLUTION_M
+    from lightfast.sim.vtr.recordings import DEFAULT_RUNS, TABLE_I
+    from lightfast.sim.vtr.scene import RouteConfig
 
     sim = subparsers.add_parser(NAME, help=HELP)
     sim_sub = sim.add_subparsers(dest="sim_command", required=True, metavar="SIMULATOR")

@@ -1,34 +1,31 @@
 """Brightness scale estimation (paper §III-C, Eq. 3–6) and rendering of the adapted map (§III-D reference image).
 
-Per frame, at the coarse pose ``T≈`` (``T_map_cam``):
+Inputs: a lighting map (mesh in the z-up map frame with per-vertex normalized radiosities B̂_x, x ∈ sun, sky,
+ground), the coarse pose ``T≈ = T_map_cam`` (4×4, metres; camera in the REP-103 optical frame), the live colour
+image I_C (pixel values 0..255) and the camera response ``f`` with its Δt (:mod:`lightfast.daylight.crf`). Per frame:
 
-1. :func:`radiosity_images` renders the normalized radiosity images ``I_B̂x`` (x ∈ sun, sky, ground) on the pixel
-   subset Ω — a uniform grid every ``stride_px`` pixels (15 in the paper) — by casting one ray per grid pixel and
-   interpolating the per-vertex B̂_x barycentrically. Ω is filtered: pixels whose ray misses the mesh or whose
-   model reflectance is below 0.03 in any channel are invalid.
-2. :func:`fit_scales` finds the brightness scales ``s_x`` (per colour channel) by minimizing
-
-   * ``E_crf = Σ_u (I_C(u) − f(Δt · Σ_x s_x I_B̂x(u)))²`` (Eq. 3–5), or
-   * ``E_lin = Σ_u (f⁻¹(I_C(u))/Δt − Σ_x s_x I_B̂x(u))²`` (Eq. 6), non-negative linear least squares.
-
-   Over-exposed pixels only bound the radiosity from below; E_crf models that (a pixel predicted saturated that is
-   saturated has zero residual, one predicted darker pulls the scales up), E_lin clips them and under-estimates
-   the brightness (paper Fig. 5).
+1. :func:`radiosity_images` renders the normalized radiosity images ``I_B̂x`` on the pixel subset Ω — a uniform grid
+   every ``stride_px`` pixels (15 in the paper) — by casting one ray per grid pixel and interpolating the per-vertex
+   B̂_x barycentrically. Ω is filtered: pixels whose ray misses the mesh or whose model reflectance is below 0.03 in
+   any channel are invalid.
+2. :func:`fit_scales` finds the brightness scales ``s_x`` (per colour channel; physical when the camera's
+   ``sensitivity`` is, docs/daylight.md) minimizing ``E_crf = Σ_u (I_C(u) − f(Δt · Σ_x s_x I_B̂x(u)))²`` (Eq. 3–5)
+   or ``E_lin = Σ_u (f⁻¹(I_C(u))/Δt − Σ_x s_x I_B̂x(u))²`` (Eq. 6, non-negative linear least squares). Over-exposed
+   pixels only bound the radiosity from below; E_crf models that (a pixel predicted saturated that is saturated has
+   zero residual, one predicted darker pulls the scales up), E_lin clips them and under-estimates the brightness
+   (paper Fig. 5).
 3. :class:`BrightnessEstimator` averages the per-frame estimates over a window of 30 frames.
-4. :func:`relit_image` renders the colour ``f(Δt · Σ_x s_x I_B̂x)`` and the depth of every pixel, the reference
-   images of frame-to-model tracking.
+4. :func:`relit_image` renders the colour ``f(Δt · Σ_x s_x I_B̂x)`` (pixel values in [0, 255]) and the z-depth (m) of
+   every pixel, the reference images of frame-to-model tracking.
 
 Solver for E_crf: Levenberg–Marquardt as in the paper, written out for the K ≤ 3 unknowns of a channel. By default
 (``solver="bounded-lm"``) each trial step is projected onto ``s ≥ 0``: brightness scales are physically
 non-negative, and a component that barely reaches the valid pixels (the sun on a cloudy day, or out of view) would
 otherwise drift negative to absorb noise. ``solver="lm"`` (unbounded LM) is available; its result is clipped at 0.
-Both start from the better (by E_crf) of the E_lin solution on unsaturated pixels and
-the caller's ``initial`` (e.g. the previous average), because a start at which all pixels are predicted saturated
-has no gradient. Components whose images are zero on all valid pixels are *unobserved*: they keep their initial
-value (0 without one) and are flagged in :attr:`ScaleFit.observed`.
-
-Δt in Eq. 4 is :attr:`CameraResponse.exposure_factor` (sensitivity · exposure time · gain), see
-:mod:`lightfast.daylight.crf`.
+Both start from the better (by E_crf) of the E_lin solution on unsaturated pixels and the caller's ``initial`` (e.g.
+the previous average): a start at which all pixels are predicted saturated has no gradient. Components whose images
+are zero on all valid pixels are *unobserved*: they keep their initial value (0 without one) and are flagged in
+:attr:`ScaleFit.observed`. Δt in Eq. 4 is :attr:`CameraResponse.exposure_factor` (sensitivity · exposure_s · gain).
 """
 from __future__ import annotations
 

@@ -3,8 +3,6 @@
 Eq. 4 compares a live pixel ``I_C(u)`` with ``f(Δt · I_B(u))``: the model radiosity ``I_B`` (Eq. 3) scaled by the
 exposure and mapped to an 8-bit value by the camera response ``f``; Eq. 6 instead linearizes the pixel with ``f⁻¹``.
 
-Model
------
 :class:`CameraResponse` stores ``f⁻¹`` as a strictly increasing table ``inverse`` of shape (256, 3): ``inverse[v, c]``
 is the *relative exposure* ``x`` that produces the pixel value ``v`` in channel ``c`` (R, G, B). Between table
 entries the curve is linear, so
@@ -16,28 +14,17 @@ entries the curve is linear, so
   carries no gradient, which is exactly why E_crf treats over-exposure as a lower bound).
 
 The relative exposure of a surface with radiosity ``B`` is ``x = sensitivity · exposure_s · gain · B``
-(:meth:`CameraResponse.exposure`); ``sensitivity`` absorbs units and optics (1 when unknown — the brightness scales
-of §III-C then simply absorb it). Tables calibrated from an exposure bracket (:func:`calibrate_from_bracket`) are
-normalized **per channel** so that ``f⁻¹(128) = 1``: Debevec/Robertson recover each channel only up to a factor,
-so the white balance between channels is unknown, and the per-channel scales of §III-C absorb it.
+(:meth:`CameraResponse.exposure`; ``exposure_s`` in seconds); ``sensitivity`` absorbs units and optics (1 when
+unknown — the brightness scales of §III-C then simply absorb it). Tables calibrated from an exposure bracket
+(:func:`calibrate_from_bracket`) are normalized **per channel** so that ``f⁻¹(128) = 1``: Debevec/Robertson recover
+each channel only up to a factor, so the white balance between channels is unknown, and the per-channel scales of
+§III-C absorb it.
 
-Files
------
-A calibration is YAML (read with ``yaml.safe_load``, written atomically)::
-
-    format: lightfast-crf
-    version: 1
-    exposure_s: 0.01          # exposure time Δt of the camera in use, seconds
-    gain: 1.0
-    sensitivity: 1.0          # relative exposure per unit radiosity, second and unit gain
-    inverse: {r: [256 floats], g: [...], b: [...]}   # f^-1 per channel, strictly increasing
-
-:func:`load_crf` also reads the ``camera.yaml`` of the simulated recordings (``crf_model``/``inverse_crf`` keys,
-one table for all channels, ``sensitivity`` per unit *radiance*): radiance is ``L = B / π`` for a Lambertian
-surface, so its sensitivity per unit radiosity is ``sensitivity / π``; with it the scales s_x of §III-C come out in
-the simulator's physical units.
-
-CLI: ``lightfast crf calibrate IMAGES... --exposures T1 T2 ... -o OUT.yaml`` (:func:`calibrate_from_files`).
+Files: YAML ``format: lightfast-crf`` (exposure, gain, sensitivity and the per-channel ``inverse`` tables; the layout
+is in docs/daylight.md), read with :func:`load_crf`, which also reads the ``camera.yaml`` of the simulated recordings
+(one table for all channels, ``sensitivity`` per unit *radiance* ``L = B / π``, i.e. ``sensitivity / π`` per unit
+radiosity: the scales s_x of §III-C then come out in the simulator's physical units). CLI: ``lightfast crf
+calibrate IMAGES... --exposures T1 T2 ... -o OUT.yaml`` (:func:`calibrate_from_files`).
 """
 from __future__ import annotations
 

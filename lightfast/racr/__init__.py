@@ -5,12 +5,13 @@ ROS-free core, one module per step:
   real scale ``s`` of a monocular VSE;
 * :mod:`~lightfast.racr.fast_alignment` — §3.4.1–3.4.2, Eq. 9, 12–15: scale-aware point-cloud alignment
   (robust rigid ICP step alternating with the closed-form scale σ_p);
-* :mod:`~lightfast.racr.fine_alignment` — §3.4.3, Eq. 10–11, 16–18: geometric + photometric (keyframe
-  photo-consistency) refinement with keyframe-pose refinement and the self-occlusion rule;
+* :mod:`~lightfast.racr.fine` — §3.4.3, Eq. 10–11, 16–18: geometric + photometric (keyframe
+  photo-consistency) refinement with keyframe-pose refinement and the self-occlusion rule (a subpackage:
+  keyframes, objective, LM solves, outer loop);
 * :mod:`~lightfast.racr.adjustment` — §3.1 and §3.5, Eq. 1–3: the hand motion ``M̂_B`` and the stop rule
   ``‖M̂_B − I₄‖_F ≤ η``;
 * :mod:`~lightfast.racr.scheme` — §3.6: VSE input, the never-stopping alignment thread and the adjustment loop,
-  parallel or serial (Table 5);
+  parallel or serial (Table 5); :mod:`~lightfast.racr.alignment_job` — the alignment thread's unit of work;
 * :mod:`~lightfast.racr.acr_baseline` — the ACR baseline (Tian et al. 2019) as the paper describes it: SIFT,
   5-point essential matrix, hand–eye taken as identity, translation scale by bisection.
 
@@ -35,6 +36,7 @@ from lightfast.racr.adjustment import (
     hand_motion,
     motion_gap,
 )
+from lightfast.racr.alignment_job import AlignmentJob
 from lightfast.racr.errors import (
     AcrError,
     AdjustmentError,
@@ -51,7 +53,7 @@ from lightfast.racr.fast_alignment import (
     fast_align,
     fast_align_best,
 )
-from lightfast.racr.fine_alignment import (
+from lightfast.racr.fine import (
     FineAlignmentConfig,
     FineAlignmentResult,
     Keyframe,
@@ -67,7 +69,7 @@ from lightfast.racr.initialization import (
     real_scale,
     relative_motions,
 )
-from lightfast.racr.scheme import SCHEME_MODES, SCHEME_STAGES, AlignmentJob, RacrScheme, SchemeConfig, SchemeStatus
+from lightfast.racr.scheme import SCHEME_MODES, SCHEME_STAGES, RacrScheme, SchemeConfig, SchemeStatus
 
 __all__ = [
     "BISECTION_RULES",

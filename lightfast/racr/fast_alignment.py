@@ -12,49 +12,19 @@ frame. Fast alignment (Eq. 12) alternates two steps until ``‖ΔT_p − I₄‖
 * **step 1 (Eq. 13), rigid:** a robust ICP step on the scaled current cloud: correspondences to the reference
   within the kernel width ``k``, point-to-plane residuals ``r = n_refᵀ(R_p σ_p p + t_p − p_ref)`` weighted by the
   Tukey biweight ``(1 − (r/k)²)²`` (IRLS), one Gauss–Newton step on SE(3). ``rigid_solver="open3d"`` runs
-  ``open3d.pipelines.registration.registration_icp`` (``TransformationEstimationPointToPlane(TukeyLoss(k))``)
-  instead; it computes the same kind of step but rebuilds its KD-tree of the reference on every call (~20× the
-  CPU time per iteration at 50 k points, ``benchmarks/results/racr_alignment.md``), so it is kept as a
-  cross-check, not as the default.
+  Open3D's ``registration_icp`` with a Tukey loss instead (a cross-check, not the default).
 * **step 2 (Eq. 14–15), scale:** the closed-form ``σ_p`` with ``R_p, t_p`` fixed, on the same correspondences
-  and Tukey weights. ``scale_residual="point_to_point"`` is Eq. 15 verbatim,
-  ``σ_p = Σ w (R_p p)ᵀ(p_ref − t_p) / Σ w (R_p p)ᵀ(R_p p)``; ``"point_to_plane"`` (default) is the same closed
-  form on the residual projected onto the reference normal, ``σ_p = Σ w (nᵀR_p p)(nᵀ(p_ref − t_p)) /
-  Σ w (nᵀR_p p)²``, i.e. Eq. 14 for the point-to-plane E_g that step 1 minimises, so both steps descend one
-  objective (benchmark: 12 instead of 18 iterations, same accuracy).
-  ``scale_pivot="centroid"`` (default) evaluates Eq. 15 in current-cloud coordinates centred on the weighted
-  centroid of the matched points (the translation that is held fixed is the one of that centroid); this changes
-  neither E_g nor its minimiser, but decouples σ_p from t_p so the alternation does not zig-zag when the cloud
-  lies far from its frame origin. ``"origin"`` keeps the paper's frame origin (benchmark: ~10× the
-  iterations). ``estimate_scale=False`` skips this step and keeps ``σ_p = sigma_init``: the paper's ablation
-  rACR-S (§5.4, "only optimizing the relative pose T_p but not the relative scale factor σ_p").
+  and Tukey weights. ``scale_residual="point_to_point"`` is Eq. 15 verbatim; ``"point_to_plane"`` (default) is the
+  same closed form on the residual projected onto the reference normal (Eq. 14 for step 1's point-to-plane E_g,
+  so both steps descend one objective). ``scale_pivot="centroid"`` (default) evaluates Eq. 15 about the weighted
+  centroid of the matched points, ``"origin"`` about the frame origin as the paper does. ``estimate_scale=False``
+  skips this step and keeps ``σ_p = sigma_init``: the paper's ablation rACR-S (§5.4).
 
-Deviations from the paper, stated
----------------------------------
-* Correspondence direction: Eq. 9 pairs each *reference* point with its nearest *current* point. Here each
-  (sampled) current point is paired with its nearest reference point, so that the reference — fixed for a whole
-  rACR run — carries the only KD-tree and the normals, built once in :class:`ReferenceCloud`. Eq. 15 is the same
-  closed form for either pairing.
-* The paper solves Eq. 13 by sparse ICP (Bouaziz et al. [34], an ℓ_p norm with p < 1); this uses the Tukey
-  biweight, another redescending robust norm, annealed from ``kernel_initial_m`` to ``kernel_final_m`` (wide
-  basin first, outlier-tight at the end). Convergence is only declared at the final kernel width. The cold start
-  of a relocalization puts the current camera at the reference pose, several degrees off: at 1–2 m from the
-  scene that misplaces points by 0.1–0.35 m, and a first kernel of 0.1 m (the earlier default) let the scale
-  collapse into a shrunken, well-fitting but wrong minimum (σ_p 0.57–0.78 instead of 1.01, seen on the simulated
-  scenes S01 and S19); 0.3 m converged to the right one on every scene tried.
-* **Matches weighted by distance on warm starts** (``match_gate``, off by default; the rACR scheme turns it on for
-  the alignment thread's warm starts, ``SchemeConfig.warm_match_gate``): at the final width each match's Tukey
-  weight is multiplied by a Tukey biweight of its nearest-neighbour distance, of ``match_gate`` × the median
-  distance of all matches — a width tied to the two clouds' own sampling and noise, not a fixed length (the
-  3DMatch clouds match at ~8 mm, the simulated ones at ~2.5 mm). A point-to-plane residual extrapolates the
-  reference point's tangent plane to the current point; where the reference has no point near it (two semi-dense
-  clouds seen under different lighting sit on different parts of a relief), that plane passes millimetres to
-  centimetres off the curved surface and the residual is a bias, not noise. Inside the 2 cm width those matches
-  slid the simulated S05 / S07 alignments 7.6 / 9.6 mm from the truth (0.5 / 2.7 mm with the weights). Narrowing
-  the Tukey width itself (to 3 × the residuals' robust spread) was tried instead and broke scene S02 and the
-  3DMatch tests; on cold starts the weights cut the far matches that lead to the solution, hence warm starts only.
-* A fixed random subset of ``max_points`` current points (seeded) forms the correspondences; the reference is
-  used at full density. ``max_points=0`` uses every point.
+Deviations from the paper — each current point paired with its nearest reference point (the reference carries the
+only KD-tree, :class:`ReferenceCloud`); a Tukey biweight annealed from ``kernel_initial_m`` to ``kernel_final_m``
+instead of sparse ICP; nearest-neighbour distance weights on warm starts (``match_gate``); a fixed random subset
+of ``max_points`` current points — with their reasons and what was measured: ``docs/racr.md``. Run time:
+``benchmarks/results/racr_alignment.md``.
 """
 from __future__ import annotations
 

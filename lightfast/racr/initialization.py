@@ -1,7 +1,7 @@
 """rACR initialization (paper §3.2, Eq. 4–8): hand–eye transform X and the real scale s of a monocular VSE.
 
-Conventions (the paper's ``M_A X = X M_B``, Fig. 3, with frames made explicit)
--------------------------------------------------------------------------------
+Conventions (the paper's ``M_A X = X M_B``, Fig. 3, with frames made explicit):
+
 * A *hand motion* ``M_B = T_hand_hand'`` is the new hand pose expressed in the hand frame before the motion
   (metres, from the platform); the platform executes it as ``T_base_hand' = T_base_hand · M_B``.
 * The matching *camera motion* is ``M_A = T_cam_cam'`` (from the VSE: ``T_vse_cam⁻¹ · T_vse_cam'``); its
@@ -9,8 +9,6 @@ Conventions (the paper's ``M_A X = X M_B``, Fig. 3, with frames made explicit)
 * ``X = T_cam_hand`` (the hand frame seen from the camera). Then ``M_A = X M_B X⁻¹``, i.e. ``M_A X = X M_B``:
   rotation ``R_A R_X = R_X R_B`` (Eq. 4) and translation ``t_A + (R_A − I) t_X = R_X t_B`` (Eq. 5).
 
-Steps
------
 1. ``R_X`` from the rotations alone (Eq. 4) with OpenCV's ``calibrateHandEye`` (Tsai–Lenz by default). OpenCV
    takes absolute poses, so the motion pairs are laid out as a star: pose 0 is the identity for hand and camera,
    pose k is ``M_B^k`` (``T_base_gripper``) and ``M_A^k`` (camera pose in the VSE world, passed as its inverse
@@ -27,9 +25,8 @@ Steps
 Degenerate input raises :class:`~lightfast.racr.errors.DegenerateMotionError`: fewer than two motions that rotate
 by ``min_rotation_deg`` (pure translations), rotation axes closer than ``min_axis_separation_deg`` (parallel
 axes leave R_X and t_X undetermined), no motion with translation along its axis (Eq. 8 undefined), or an R_X
-that does not satisfy Eq. 4 (RMS residual above ``max_rotation_residual_deg``). The last guards against
-OpenCV 4.x's Tsai solver, which silently returns the identity when the motions rotate less than about 17°
-(measured with opencv-python-headless 4.14); Horaud and Park have no such limit.
+that does not satisfy Eq. 4 (RMS residual above ``max_rotation_residual_deg``): OpenCV 4.x's Tsai solver silently
+returns the identity for small rotations (docs/racr.md); Horaud and Park have no such limit.
 """
 from __future__ import annotations
 

@@ -7,23 +7,27 @@ sections (dotted parameters, e.g. ``scheme.mode``, ``adjustment.eta``): :class:`
 (``initialization``: hand–eye solver), :class:`~lightfast.racr.scheme.SchemeConfig` (``scheme``, §3.6),
 :class:`~lightfast.racr.adjustment.AdjustmentConfig` (``adjustment``: η, §3.5),
 :class:`~lightfast.racr.fast_alignment.FastAlignmentConfig` (``fast``, §3.4.2) and
-:class:`~lightfast.racr.fine_alignment.FineAlignmentConfig` (``fine``, §3.4.3), each defaulting to the core's
+:class:`~lightfast.racr.fine.FineAlignmentConfig` (``fine``, §3.4.3), each defaulting to the core's
 defaults. Everything that shapes a run is read-only while the node runs; the reporting options may change.
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 
 from lightfast.config import param
+from lightfast.errors import LightfastError
 from lightfast.node_options import SensorInputOptions
 from lightfast.racr.adjustment import AdjustmentConfig
 from lightfast.racr.fast_alignment import FastAlignmentConfig
-from lightfast.racr.fine_alignment import FineAlignmentConfig
+from lightfast.racr.fine import FineAlignmentConfig
 from lightfast.racr.initialization import InitializationConfig
+from lightfast.racr.reference import ReferenceObservation, load_reference
 from lightfast.racr.scheme import SchemeConfig
-from lightfast.racr.session import SessionConfig
+from lightfast.racr.session import RacrSession, SessionConfig
 
-__all__ = ["RacrNodeConfig"]
+__all__ = ["RacrNodeConfig", "ReferenceLoader"]
 
 # The core's defaults are the node's defaults (test_config pins it).
 _SESSION = SessionConfig()
@@ -79,3 +83,42 @@ class RacrNodeConfig(SensorInputOptions):
         20000, description="Points of /racr/aligned_cloud (a fixed subsample; 0 = all, -1 = do not publish).",
         min=-1,
     )
+
+    def start_session(self, reference: ReferenceObservation, clock: Callable[[], float]) -> RacrSession:
+        """The session of a run against ``reference`` with this configuration (what ``racr_node`` and the
+        evaluation run); ``clock`` gives the time in seconds."""
+        return RacrSession(reference.points_m, reference.T_ref_camref, config=self.session, scheme_config=self.scheme,
+                           fast_config=self.fast, fine_config=self.fine, adjustment_config=self.adjustment,
+                           init_config=self.initialization, clock=clock)
+
+
+@dataclass
+class ReferenceLoader:
+    """The reference of a run (``reference_path``, ``reference_scene``) and its session, loaded on the first
+    :meth:`attempt` and retried every ``reference_retry_s`` (``now_s``: a monotonic clock) while that fails."""
+
+    config: RacrNodeConfig
+    error: str | None = None  # why the last attempt failed
+    _last_attempt_s: float | None = None
+
+    @property
+    def path(self) -> Path:
+        return Path(self.config.reference_path).expanduser()
+
+    def forget_attempts(self) -> None:
+        """The next :meth:`attempt` tries at once."""
+        self._last_attempt_s = None
+
+    def attempt(self, now_s: float, clock: Callable[[], float]) -> tuple[ReferenceObservation, RacrSession] | None:
+        """The reference and a new session on it, or None (not tried now, or failed: :attr:`error` says why)."""
+        if self._last_attempt_s is not None and now_s - self._last_attempt_s < self.config.reference_retry_s:
+            return None
+        self._last_attempt_s = now_s
+        try:
+            reference = load_reference(self.path, scene=self.config.reference_scene or None)
+            session = self.config.start_session(reference, clock)
+        except (LightfastError, OSError) as exc:
+            self.error = f"reference {self.path}: {exc}"
+            return None
+        self.error = None
+        return reference, session

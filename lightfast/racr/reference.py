@@ -4,7 +4,7 @@ intrinsics, reference camera pose ``T_ref_camref``), ``points.npz`` (the cloud i
 grey intensity in [0, 1]) and ``image.png`` (the reference image, RGB). Written atomically, read with every damage
 reported as a :class:`~lightfast.racr.errors.ReferenceFileError`.
 
-The core owns the format (``racr_node`` reads it); the simulator (:mod:`lightfast.sim.racr_scenes`) writes one per
+The core owns the format (``racr_node`` reads it); the simulator (:mod:`lightfast.sim.racr`) writes one per
 scene with the same functions.
 """
 from __future__ import annotations

@@ -1,47 +1,32 @@
 """The rACR scheme (paper §3.6): VSE input, an alignment thread that never stops refining, and the adjustment loop;
 plus the serial scheme the paper compares it with (Table 5). ROS-free.
 
-:class:`RacrScheme` owns the state shared by the paper's three threads and one thread of its own:
+:class:`RacrScheme` owns the state shared by the paper's three threads and runs the alignment thread itself:
 
-* **VSE input** (:meth:`RacrScheme.add_vse_observation`, :meth:`RacrScheme.add_vse_pose`): the latest current
-  cloud P with its intensities and keyframes, and the latest camera pose ``T_A = T_cur_cam``, all with the real
-  scale s applied (§3.3). The input is a latest-wins slot: the alignment always works on the newest cloud; one
-  superseded before its alignment finished is dropped (``status.dropped_observations``).
-* **Alignment thread** (§3.4, started by :meth:`RacrScheme.start`): takes the newest observation and runs the fast
-  alignment (Eq. 12–15) warm-started from its last estimate (a cold start from ``T_ref_cur_init`` / ``sigma_init``
-  the first time — from that guess and, per ``start_rotation_deg`` / ``start_translation_m``, eight variants with
-  the current camera turned or shifted, keeping the best-fitting plausible result (:func:`fast_align_best`); the
-  paper gives no cold start, and from the reference pose 4–10° off a single start settled in wrong minima on
-  4 of the 20 simulated scenes), repeating it on the same cloud until it converges (or settles: ends where it
-  ended before, within ``settle_factor`` × its tolerances); then the fine alignment (Eq. 16–18) from that result;
-  then waits for the next observation. Each result becomes the latest ``(T_p, σ_p)``.
-* **Adjustment** (§3.5, :meth:`RacrScheme.next_hand_motion`, called by the platform driver whenever the platform is
-  idle): Eq. 3 from the latest ``T_A``, ``T_p``, ``σ_p`` and ``X``; ``g ≤ η`` means converged. A motion is handed
-  out once per platform stop: after issuing one, the scheme waits for a platform pose reported with
-  ``moving=False`` (:meth:`RacrScheme.add_platform_pose`) and then for a VSE pose stamped after it, so every motion
-  is computed from a camera pose taken at rest.
+* **VSE input** (:meth:`~RacrScheme.add_vse_observation`, :meth:`~RacrScheme.add_vse_pose`): the latest current
+  cloud P ``(n, 3)`` with its intensities and keyframes, and the latest camera pose ``T_A = T_cur_cam`` (4×4), in
+  the current-cloud frame with the real scale s applied (§3.3, metres). A latest-wins slot: a cloud superseded
+  before its alignment finished is dropped (``status.dropped_observations``).
+* **Alignment thread** (§3.4): on the newest observation the fast alignment (Eq. 12–15), warm-started from the
+  last estimate (a cold start the first time: ``T_ref_cur_init`` / ``sigma_init`` and eight turned or shifted
+  variants, :func:`~lightfast.racr.fast_alignment.fast_align_best`), repeated until it converges or settles; then
+  the fine alignment (Eq. 16–18). Each result becomes the latest ``(T_p, σ_p)``. Its units of work are
+  :class:`~lightfast.racr.alignment_job.AlignmentJob`.
+* **Adjustment** (§3.5, :meth:`~RacrScheme.next_hand_motion`, called whenever the platform is idle): Eq. 3 from
+  the latest ``T_A``, ``T_p``, ``σ_p`` and ``X`` gives the hand motion ``M̂_B`` (4×4, hand frame, metres) and
+  ``g``; ``g ≤ η`` means converged. One motion per platform stop: the next one needs a reported stop
+  (:meth:`~RacrScheme.add_platform_pose` with ``moving=False``) and a VSE pose stamped after it.
 
-Modes (``SchemeConfig.mode``):
+Modes (``SchemeConfig.mode``): ``"parallel"`` (the paper's rACR) aligns all the time, also while the platform
+moves; ``"serial"`` (Table 5: "alternately conducting point cloud alignment and motion execution in one thread")
+aligns nothing while the platform moves and offers the next motion only once the newest observation is aligned to
+convergence (fast, then fine).
 
-* ``"parallel"`` (the paper's rACR): the alignment runs all the time, also while the platform moves; a motion is
-  available as soon as the platform stopped and the VSE saw the new pose.
-* ``"serial"`` (the paper's serial rACR, Table 5: "alternately conducting point cloud alignment and motion
-  execution in one thread"): while the platform moves, nothing is aligned; after it stopped, the newest
-  observation is aligned to convergence (fast, then fine), and only then is the next motion available.
-
-Time: every stamp and timeout uses the injected ``clock`` (seconds, ``time.monotonic`` by default), so a simulator
-can run the scheme in simulated time. The alignment work is also available as explicit steps
-(:meth:`RacrScheme.next_alignment_job`, :meth:`AlignmentJob.run`, :meth:`RacrScheme.commit`) for a discrete-event
-simulation that charges each job a simulated duration and commits its result when that time has passed; the
-thread uses the same steps. Use either the thread or the steps, not both.
-
-Errors: bad input raises at the call (:class:`~lightfast.racr.errors.AlignmentError` for clouds, keyframes and
-intensities, :class:`~lightfast.racr.errors.AdjustmentError` for poses). An alignment that fails on an observation
-(:class:`~lightfast.racr.errors.RacrError`) is logged and shown in :attr:`RacrScheme.status`; the thread keeps the
-previous estimate and waits for the next observation. Anything else stops the thread and is re-raised as
-:class:`SchemeError` by the next call of :meth:`~RacrScheme.next_hand_motion`, an ``add_*`` method or
-:meth:`~RacrScheme.stop`. No motion is issued before a converged fast alignment exists, and no motion is issued
-from a pose older than the platform's last stop.
+Time: every stamp and timeout uses the injected ``clock`` (seconds). A discrete-event simulator can run the
+alignment without the thread (:meth:`~RacrScheme.next_alignment_job`, :meth:`AlignmentJob.run`,
+:meth:`~RacrScheme.commit`). Errors: bad input raises at the call; an alignment's
+:class:`~lightfast.racr.errors.RacrError` is logged and shown in :attr:`~RacrScheme.status`; anything else stops the
+thread and is re-raised as :class:`SchemeError` by the next call. Details: ``docs/racr.md``.
 """
 from __future__ import annotations
 
@@ -58,20 +43,14 @@ from numpy.typing import ArrayLike, NDArray
 from lightfast.config import Config, param
 from lightfast.geometry import make_transform, so3_exp
 from lightfast.racr.adjustment import AdjustmentConfig, AdjustmentStep, _inverse, _rigid, adjustment_step
-from lightfast.racr.errors import AlignmentError, RacrError, SchemeError
-from lightfast.racr.fast_alignment import (
-    FastAlignmentConfig,
-    FastAlignmentResult,
-    ReferenceCloud,
-    fast_align,
-    fast_align_best,
-)
-from lightfast.racr.fine_alignment import FineAlignmentConfig, FineAlignmentResult, Keyframe, fine_align
+from lightfast.racr.alignment_job import AlignmentJob, _Observation, finite_vse_cloud
+from lightfast.racr.errors import AlignmentError, SchemeError
+from lightfast.racr.fast_alignment import FastAlignmentConfig, FastAlignmentResult, ReferenceCloud
+from lightfast.racr.fine import FineAlignmentConfig, Keyframe
 
 __all__ = [
     "SCHEME_MODES",
     "SCHEME_STAGES",
-    "AlignmentJob",
     "RacrScheme",
     "SchemeConfig",
     "SchemeStatus",
@@ -86,39 +65,8 @@ SCHEME_MODES = ("parallel", "serial")
 #: computed; a motion is being executed; converged (g ≤ η); the platform did not report a stop within
 #: ``platform_timeout_s``; the thread died (see ``status.error``).
 SCHEME_STAGES = ("waiting_for_vse", "aligning", "ready", "moving", "converged", "platform_timeout", "failed")
-_MIN_POINTS = 30
 #: Fast-alignment results remembered to recognize a cycle (see :meth:`RacrScheme._settled`).
 _SETTLE_HISTORY = 4
-
-
-def finite_vse_cloud(points: ArrayLike, intensities: ArrayLike | None) -> tuple[Array, Array | None,
-                                                                              NDArray[np.bool_]]:
-    """A VSE cloud ``(n, 3)`` and its intensities ``(n,)`` (or None) without the rows that hold a non-finite
-    coordinate or intensity; also returns the kept-rows mask. Bad shapes, or fewer than 30 points left, raise
-    :class:`AlignmentError`."""
-    try:
-        pts = np.array(points, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise AlignmentError(f"the VSE cloud must be an (n, 3) array: {exc}") from None
-    if pts.ndim != 2 or pts.shape[1] != 3:
-        raise AlignmentError(f"the VSE cloud must have shape (n, 3), got {pts.shape}")
-    ok = np.all(np.isfinite(pts), axis=1)
-    inten = None
-    if intensities is not None:
-        try:
-            inten = np.array(intensities, dtype=np.float64)
-        except (TypeError, ValueError) as exc:
-            raise AlignmentError(f"the VSE intensities must be an (n,) array: {exc}") from None
-        if inten.shape != (len(pts),):
-            raise AlignmentError(f"the VSE intensities must have shape ({len(pts)},), got {inten.shape}")
-        ok &= np.isfinite(inten)
-        inten = inten[ok]
-    pts = pts[ok]
-    if len(pts) < _MIN_POINTS:
-        raise AlignmentError(
-            f"the VSE cloud has {len(pts)} finite points (of {len(ok)}); at least {_MIN_POINTS} are needed"
-        )
-    return pts, inten, ok
 
 
 @dataclass(frozen=True)
@@ -181,18 +129,6 @@ class SchemeStatus:
 
 
 @dataclass
-class _Observation:
-    seq: int
-    stamp: float
-    points: Array
-    intensities: Array | None
-    T_cur_cam: Array
-    keyframes: tuple[Keyframe, ...]
-    fast_converged: bool = False
-    done: bool = False
-
-
-@dataclass
 class _Estimate:
     T_ref_cur: Array
     sigma: float
@@ -202,68 +138,6 @@ class _Estimate:
     usable: bool  # a converged fast alignment or a fine one has been reached (motions may be issued)
     complete: bool  # the alignment of observation ``seq`` has finished (fine done or failed, or fine disabled)
     observation: _Observation  # the cloud it was computed on (``seq`` moves on when a failed fine step keeps it)
-
-
-class AlignmentJob:
-    """One unit of the alignment thread's work on one observation: a fast alignment (warm or cold) or a fine
-    alignment. :meth:`run` computes without touching the scheme (safe outside its lock); :meth:`RacrScheme.commit`
-    publishes the result."""
-
-    def __init__(
-        self,
-        kind: str,
-        observation: _Observation,
-        reference: ReferenceCloud,
-        T_init: Array,
-        sigma_init: float,
-        fast_config: FastAlignmentConfig,
-        fine_config: FineAlignmentConfig,
-        starts: Sequence[Array] = (),
-        max_scale_change: float | None = None,
-    ) -> None:
-        self.kind = kind
-        self._starts = tuple(starts)
-        self._max_scale_change = max_scale_change
-        self._obs = observation
-        self._reference = reference
-        self._T_init = T_init
-        self._sigma_init = sigma_init
-        self._fast_config = fast_config
-        self._fine_config = fine_config
-        self.result: FastAlignmentResult | FineAlignmentResult | None = None
-        self.error: RacrError | None = None
-        self.seconds = 0.0
-        #: fast alignments this job runs (a cold start tries several starts; see ``SchemeConfig.start_*``)
-        self.alignments = max(1, len(self._starts)) if kind == "fast" else 1
-
-    @property
-    def observation_stamp(self) -> float:
-        return self._obs.stamp
-
-    def run(self) -> AlignmentJob:
-        """Run the alignment. A :class:`RacrError` (bad or non-overlapping data) is kept in :attr:`error`; anything
-        else propagates."""
-        start = time.perf_counter()
-        try:
-            if self.kind == "fine":
-                self.result = fine_align(
-                    self._obs.points, self._reference, self._obs.keyframes, T_ref_cur_init=self._T_init,
-                    sigma_init=self._sigma_init, intensities=self._obs.intensities, config=self._fine_config,
-                )
-            elif self._starts:
-                self.result, _ = fast_align_best(self._obs.points, self._reference, self._starts,
-                                                 sigma_init=self._sigma_init, config=self._fast_config,
-                                                 align=fast_align,
-                                                 max_scale_change=self._max_scale_change)
-            else:
-                self.result = fast_align(
-                    self._obs.points, self._reference, T_ref_cur_init=self._T_init, sigma_init=self._sigma_init,
-                    config=self._fast_config,
-                )
-        except RacrError as exc:
-            self.error = exc
-        self.seconds = time.perf_counter() - start
-        return self
 
 
 class RacrScheme:

@@ -2,8 +2,6 @@
 the hand–eye and real-scale initialization, then the scheme. ROS-free; ``racr_node`` feeds it messages as arrays
 and publishes what it returns.
 
-Flow
-----
 1. **Initialization motions (§3.2).** The session issues ``init_motions`` hand motions itself: for every axis
    ``a`` of ``init_axes`` (hand frame) a screw motion ``M_B = ⟨exp(θ a), d a⟩`` (rotation ``init_rotation_deg``
    about ``a`` and translation ``init_translation_m`` along it: Eq. 8 needs a translation along the rotation axis),
@@ -23,11 +21,9 @@ Flow
    ``moving=False`` poses. Hand motions then come from :meth:`RacrScheme.next_hand_motion` until it reports
    convergence (``g ≤ η``); then the run is over and no further motion is issued.
 
-Time: stamps are seconds on the injected ``clock`` (the node's ROS clock), the same clock the VSE and the platform
-stamp their messages with. A command is issued at ``clock()``; the platform's stop for it must be stamped at or
-after that, and the VSE pose used after a stop must be stamped after the stop, so no motion is ever computed from
-a camera pose taken before the platform came to rest.
-
+Time: stamps are seconds on the injected ``clock`` (the node's ROS clock, which also stamps the VSE's and the
+platform's messages). A command is issued at ``clock()``; its stop must be stamped at or after that and the next
+VSE pose used must be newer than the stop: no motion is computed from a camera pose taken before it stopped.
 Nothing here reads simulator truth: the inputs are VSE output, reported hand poses and the reference observation.
 Errors: bad input raises :class:`~lightfast.racr.errors.RacrError` subclasses at the call (the caller reports and
 goes on); the status (:attr:`RacrSession.status`) says what the session waits for and why it stopped.
@@ -46,13 +42,14 @@ from numpy.typing import ArrayLike, NDArray
 
 from lightfast.camera import PinholeCamera
 from lightfast.config import Config, ConfigError, param
-from lightfast.geometry import make_transform, so3_exp
+from lightfast.geometry import make_transform, rotation_angle_deg, so3_exp
 from lightfast.racr.adjustment import AdjustmentConfig, _inverse, _rigid, camera_pose_in_reference
+from lightfast.racr.alignment_job import finite_vse_cloud
 from lightfast.racr.errors import InitializationError, RacrError
 from lightfast.racr.fast_alignment import FastAlignmentConfig, ReferenceCloud
-from lightfast.racr.fine_alignment import FineAlignmentConfig, Keyframe
+from lightfast.racr.fine import FineAlignmentConfig, Keyframe
 from lightfast.racr.initialization import HandEyeResult, InitializationConfig, initialize
-from lightfast.racr.scheme import RacrScheme, SchemeConfig, SchemeStatus, finite_vse_cloud
+from lightfast.racr.scheme import RacrScheme, SchemeConfig, SchemeStatus
 
 __all__ = [
     "HAND_AXES",
@@ -134,6 +131,12 @@ class MotionCommand:
     stamp: float
     g: float | None = None
     T_ref_cam: Array | None = None
+
+    def describe(self) -> str:
+        """One line: kind, index, length (cm), angle (deg) and g."""
+        t, angle = float(np.linalg.norm(self.M_hand[:3, 3])), float(rotation_angle_deg(self.M_hand[:3, :3]))
+        g = "" if self.g is None else f", g={self.g:.3g}"
+        return f"{self.kind} motion {self.index}: {100 * t:.2f} cm, {angle:.2f} deg{g}"
 
 
 @dataclass(frozen=True)

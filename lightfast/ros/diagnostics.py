@@ -9,11 +9,11 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Iterable, Mapping
-from enum import IntEnum
 from typing import Any
 
 from lightfast.ros.convert import make_header
 from lightfast.ros.msgtypes import RCLPY, MessageTypes
+from lightfast.status import Level
 
 __all__ = [
     "Level",
@@ -25,15 +25,6 @@ __all__ = [
     "format_value",
     "log_at",
 ]
-
-
-class Level(IntEnum):
-    """``DiagnosticStatus.level`` values."""
-
-    OK = 0
-    WARN = 1
-    ERROR = 2
-    STALE = 3
 
 
 def format_value(value: Any) -> str:

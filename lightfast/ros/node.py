@@ -2,12 +2,14 @@
 
 A :class:`LightfastNode` declares its parameters from its configuration dataclass (:class:`ConfigParameters`:
 descriptions, ranges, validated run-time changes, unknown names reported), logs problems throttled per kind
-(:class:`~lightfast.ros.diagnostics.ProblemLog`), publishes its status as a ``DiagnosticArray`` on its status topic
+(:class:`~lightfast.ros.diagnostics.ProblemLog`) and what core components report (:meth:`LightfastNode.report`),
+publishes its status as a ``DiagnosticArray`` on its status topic
 (the node's counters in every status), and announces itself on ``/lightfast/ready`` once it can take data.
 """
 from __future__ import annotations
 
-from collections.abc import Mapping
+import threading
+from collections.abc import Callable, Mapping
 from typing import Any, Generic, TypeVar
 
 from diagnostic_msgs.msg import DiagnosticArray
@@ -19,6 +21,8 @@ from lightfast.ros.diagnostics import Level, ProblemLog, diagnostic_array, diagn
 from lightfast.ros.params import ConfigParameters
 from lightfast.ros.qos import OUTPUT_QOS
 from lightfast.ros.ready import announce_ready
+from lightfast.ros.worker import StepWorker
+from lightfast.status import Log, Problem, Report
 
 __all__ = ["LightfastNode"]
 
@@ -39,6 +43,7 @@ class LightfastNode(Node, Generic[C]):
         self._ready_pub: Publisher | None = None
         #: the latest status (level, message): a heartbeat repeats it
         self.last_status: tuple[Level, str] = (Level.OK, "starting")
+        self._workers: list[StepWorker] = []
 
     def log(self, level: Level, text: str) -> None:
         """A log line at the severity of a status level."""
@@ -71,6 +76,41 @@ class LightfastNode(Node, Generic[C]):
             self.stats["bad_inputs"] += 1
         self.problems.report(key, text, level)
         self.publish_status(level, text, values, stamp_ns=stamp_ns)
+
+    def report(self, report: Report) -> None:
+        """What a core component reported (:mod:`lightfast.status`): a problem counted, logged throttled and
+        published as a status; a log line (throttled per key when it has one); a status published."""
+        if isinstance(report, Problem):
+            self.problem(report.key, report.text, report.level, stamp_ns=report.stamp_ns, values=report.values,
+                         count=report.counted)
+        elif isinstance(report, Log):
+            if report.key is None:
+                self.log(report.level, report.text)
+            else:
+                self.problems.report(report.key, report.text, report.level)
+        else:
+            self.publish_status(report.level, report.message, report.values, stamp_ns=report.stamp_ns)
+
+    def start_worker(self, name: str, step: Callable[[], bool], *,
+                     period_s: Callable[[], float] | None = None) -> StepWorker:
+        """A :class:`~lightfast.ros.worker.StepWorker` thread for the node's heavy steps (the one threading model of
+        lightfast's nodes: callbacks convert and queue, workers compute). A step that raises is an ``internal``
+        problem (ERROR) and the worker carries on; :meth:`destroy_node` stops the workers."""
+        worker = StepWorker(name, step, self._on_worker_error, period_s=period_s)
+        self._workers.append(worker)
+        return worker
+
+    def _on_worker_error(self, exc: Exception) -> None:
+        self.problem("internal", f"{threading.current_thread().name} step failed: {exc!r}", Level.ERROR)
+
+    def stop_workers(self) -> None:
+        """Stop the workers (after their current step)."""
+        for worker in self._workers:
+            worker.stop()
+
+    def destroy_node(self) -> None:
+        self.stop_workers()
+        super().destroy_node()
 
     def announce_ready(self) -> None:
         """Announce on ``/lightfast/ready`` that the node can take data (for ``lightfast wait-ready``)."""

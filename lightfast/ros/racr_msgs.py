@@ -19,13 +19,13 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from lightfast.ros.convert import (
-    _pose_to_matrix,
     image_to_numpy,
     make_header,
     matrix_to_pose,
     pointcloud2_to_numpy,
     stamp_to_ns,
 )
+from lightfast.ros.convert.poses import _pose_to_matrix
 from lightfast.ros.errors import ImageConversionError, PointCloudConversionError
 from lightfast.ros.msgtypes import RCLPY, MessageTypes
 

@@ -24,8 +24,8 @@ from lightfast.geometry import make_transform, quat_to_matrix
 from lightfast.ros.convert import pose_stamped_to_matrix
 from lightfast.ros.diagnostics import diagnostic_values
 from lightfast.ros.errors import ToolError
+from lightfast.sim.racr import RacrScene
 from lightfast.sim.racr_live import FinalPoseResult, evaluate_final_pose
-from lightfast.sim.racr_scenes import RacrScene
 from lightfast.topics import PLATFORM_STATUS_TOPIC, RACR_STATUS_TOPIC, SIM_CAMERA_POSE_TOPIC
 
 __all__ = ["NODE_NAME", "TERMINAL_FAILURES", "RacrRun", "pose7_to_matrix", "score_run", "wait_converged"]

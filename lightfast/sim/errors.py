@@ -19,7 +19,7 @@ class PlatformError(SimError, InputError, ValueError):
 
 class RacrSimError(SimError, InputError, ValueError):
     """A scene or reference file that cannot be used (missing, half-written, wrong format or version), or bad
-    simulator input (:mod:`~lightfast.sim.racr_scenes`)."""
+    simulator input (:mod:`~lightfast.sim.racr`)."""
 
 
 class RadianceError(SimError, InternalError, RuntimeError):

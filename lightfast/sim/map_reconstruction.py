@@ -7,7 +7,7 @@ tracked against the simulator's exact mesh would enjoy a geometric accuracy no r
 recordings come with a map made the same way:
 
 1. **Scan**: depth images from standpoints spread over the free floor (two heights, yaw every 30°, three pitches),
-   each measured by the recordings' :class:`~lightfast.sim.gt_renderer.DepthSensor` (correlated disparity noise,
+   each measured by the recordings' :class:`~lightfast.sim.daylight.sensors.DepthSensor` (correlated disparity noise,
    systematic distortion, projector shadows, registration error; no sun), at poses with the small independent error
    of a tracked scan (``pose_noise_m``, ``pose_noise_deg``).
 2. **Fusion**: Open3D's TSDF volume (``voxel_m``, truncation 4 voxels), marching-cubes mesh, fragments
@@ -38,8 +38,8 @@ from numpy.typing import NDArray
 from lightfast.daylight.mesh import ReflectanceMesh
 from lightfast.progress import track
 from lightfast.raycast import RayCaster
-from lightfast.sim.daylight_scene import DaylightScene
-from lightfast.sim.gt_renderer import DepthSensor
+from lightfast.sim.daylight.scene import DaylightScene
+from lightfast.sim.daylight.sensors import DepthSensor
 
 __all__ = ["ReconstructionSettings", "fit_planes", "reconstruct_map", "scan_poses"]
 
@@ -183,7 +183,7 @@ def reconstruct_map(scene: DaylightScene, settings: ReconstructionSettings | Non
     """The method's map of ``scene``: TSDF fusion of a simulated night-time depth scan with recovered reflectance."""
     import open3d as o3d
 
-    from lightfast.sim.daylight_recordings import camera_for_size
+    from lightfast.sim.daylight.sequences import camera_for_size
 
     cfg = settings or ReconstructionSettings()
     sensor = sensor or DepthSensor()

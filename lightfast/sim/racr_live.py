@@ -28,8 +28,8 @@ from numpy.typing import ArrayLike, NDArray
 from lightfast.config import param
 from lightfast.geometry import inverse, rotation_angle_deg
 from lightfast.sim.errors import PlatformError
+from lightfast.sim.racr import RacrScene
 from lightfast.sim.racr_platform import PlatformConfig, PlatformSimulator, VseConfig
-from lightfast.sim.racr_scenes import RacrScene
 
 __all__ = [
     "LIGHTINGS",

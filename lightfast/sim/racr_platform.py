@@ -1,62 +1,31 @@
 """Simulated robotic platform and VSE (visual SLAM engine) stand-in for rACR (paper §3.1–3.3, §3.6), ROS-free.
 
-Both classes hold the *truth* (the true hand and camera poses, the hand–eye transform, the VSE's scale and drift)
-and hand out only what the real devices would: reported hand poses, images, a scaled point cloud and VSE poses.
-The truth is exposed through explicitly named ``true_*`` / ``truth_*`` attributes for the evaluation and tests;
-rACR must not use them.
+Both hold the *truth* (true hand and camera poses, hand–eye X, the VSE's scale and drift) and hand out only what
+the real devices would: reported hand poses, images, a scaled point cloud and VSE poses; the truth is exposed as
+``true_*`` / ``truth_*`` attributes for the evaluation and tests only. Frames as in
+:mod:`lightfast.racr.initialization`: ``world`` (the scene, metres, z up), ``base`` (fixed in the world),
+``X = T_cam_hand``, ``T_world_cam = T_world_hand · X⁻¹``; a hand motion ``M_B = T_hand_hand'`` is executed as
+``T_world_hand' = T_world_hand · M_B`` and moves the camera by ``M_A = T_cam_cam' = X M_B X⁻¹``.
 
-Frames and conventions (the same as :mod:`lightfast.racr.initialization`)
--------------------------------------------------------------------------
-* ``world``: the simulated scene's frame (metres, z up). ``base``: the platform's base frame, fixed in the world.
-* ``X = T_cam_hand`` (hand–eye transform, unknown to rACR); the camera pose is ``T_world_cam = T_world_hand · X⁻¹``.
-* A hand motion ``M_B = T_hand_hand'`` is executed as ``T_world_hand' = T_world_hand · M_B``; the camera then moves
-  by ``M_A = T_cam_cam' = X M_B X⁻¹``.
-
-Platform (:class:`PlatformSimulator`)
--------------------------------------
-Mechanical error of one commanded motion ``M = ⟨R, t⟩`` with rotation vector ``φ = log R`` (angle θ = |φ|)::
+:class:`PlatformSimulator` executes a commanded ``M = ⟨R, t⟩`` (``φ = log R``, θ = |φ|) with mechanical error::
 
     φ_true = (1 + b_r) φ + ε_r,   ε_r ~ N(0, σ_r² I₃),  σ_r = f_r θ + floor_r      (rad, per axis)
     t_true = (1 + b_t) t + ε_t,   ε_t ~ N(0, σ_t² I₃),  σ_t = f_t |t| + floor_t    (m, per axis)
+    duration = settle_s + seconds_per_cm · 100 |t| + seconds_per_deg · θ_deg      (s, axes one after the other)
 
-(``f`` = ``*_noise_frac``, ``floor`` = ``*_noise_floor_*``, ``b`` = ``*_bias_frac``, an over- or undershoot that
-repeats every motion). The identity command does not move the platform. The **encoders report the commanded
-motion**: ``reported_hand_pose = T_base_hand`` is the product of the commanded motions (what the joint encoders and
-the kinematic model believe); the mechanical error is invisible to them and accumulates in the true pose only.
+(``f`` = ``*_noise_frac``, ``floor`` = ``*_noise_floor_*``, ``b`` = ``*_bias_frac``; 1.5 s/cm is the paper's
+platform, 0.5 s/° an assumption). The encoders report the commanded motion (``reported_hand_pose`` =
+``T_base_hand``); the error accumulates in the true pose only. Non-rigid commands or ones over
+``max_translation_m`` / ``max_rotation_deg`` raise :class:`PlatformError` and do not move the platform.
 
-Duration of a motion (the platform moves its translation and rotation axes one after the other)::
-
-    duration = settle_s + seconds_per_cm · 100 |t| + seconds_per_deg · θ_deg
-
-with 1.5 s per cm as the paper's platform (§3.6). The rotation term is an assumption of this simulator (the
-paper gives none): 0.5 s per degree (2°/s), so a 10° turn costs as much as 3.3 cm of travel.
-
-Commands that are not finite rigid transforms, or exceed ``max_translation_m`` / ``max_rotation_deg``, are refused
-with :class:`PlatformError` and leave the platform where it is.
-
-VSE stand-in (:class:`VseStandIn`)
-----------------------------------
-Plays a monocular direct SLAM engine (DSO, §3.3) that runs on the camera:
-
-* **Frame and scale.** The VSE world ``vse`` is the camera frame of its first observation (or a given
-  ``T_world_vse``); distances are in VSE units, ``p_vse = (T_world_vse⁻¹ p_world) / s`` with the monocular scale
-  ``s`` = ``scale_m_per_vse`` (metres per VSE unit, what rACR's Eq. 8 recovers; unknown to rACR).
-* **Keyframes.** :meth:`VseStandIn.observe` renders ``n_keyframes`` images: at the current camera pose and at poses
-  around it (``keyframe_baseline_m`` sideways, ``keyframe_rotation_deg``), as a monocular initialization has them.
-* **Semi-dense cloud.** Per keyframe, in every ``block_px`` × ``block_px`` block the pixel of largest grey-level
-  gradient (Sobel) above ``gradient_threshold`` (DSO-like point selection), back-projected with the *true* depth
-  times ``1 + N(0, depth_noise_rel²)`` and a pixel jitter of ``pixel_noise_px``; a fraction ``outlier_fraction``
-  gets a gross depth error of up to ±15 %. Intensity per point: the keyframe's grey value / 255 in [0, 1]. At most
-  ``max_points`` points (deterministic subsample).
-* **Drift.** A similarity ``D`` (rotation, translation, scale) that random-walks with the camera's path: every
-  call adds an increment whose std is ``drift_*_per_m`` times the path travelled since the last call; ``D`` maps
-  the true scaled VSE frame to the reported one; every keyframe pose also gets an independent jitter
-  (``pose_noise_*``). Points are mapped with the pose of the keyframe they come from, so cloud
-  and poses stay consistent as in a real SLAM map.
-
-The renderer is duck-typed (:class:`Renderer`): ``render(T_world_cam, camera, lighting, sensor=, rng=)`` returning an
-object with ``image`` (H, W, 3) uint8 and ``depth_m`` (H, W) float (0 where nothing was hit), e.g.
-:class:`lightfast.sim.racr_scenes.RacrRenderer`.
+:class:`VseStandIn` plays a monocular direct SLAM engine (DSO, §3.3): VSE frame = the camera frame of its first
+observation (or ``T_world_vse``), ``p_vse = (T_world_vse⁻¹ p_world) / s`` with ``s`` = ``scale_m_per_vse`` (m per
+VSE unit, what Eq. 8 recovers). :meth:`VseStandIn.observe` renders ``n_keyframes`` keyframes at and around the
+camera pose and returns a semi-dense cloud (DSO-like gradient point selection, true depth with noise and outliers,
+intensity = grey / 255 in [0, 1]) and poses under a random-walk similarity drift per metre travelled. The renderer
+is duck-typed (:class:`Renderer`, e.g. :class:`lightfast.sim.racr.render.RacrRenderer`): ``render(T_world_cam,
+camera, lighting, sensor=, rng=)`` → ``image`` (H, W, 3) uint8 and ``depth_m`` (H, W) float (0: nothing hit).
+Model details: docs/racr_simulator.md.
 """
 from __future__ import annotations
 

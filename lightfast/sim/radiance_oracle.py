@@ -1,40 +1,30 @@
 """Reference irradiance from Radiance (``rtrace -I``): the oracle the daylight radiosity is validated against.
 
-The light model is the one of the daylight paper (§III-A): the outside world is a sphere at infinity split by the
-horizon plane (normal ``up``) into three components, each computed separately with unit brightness:
+Implements the light model of the daylight paper (Krawez et al., RA-L 2021, §III-A) in Radiance: the outside world
+is a sphere at infinity split by the horizon plane (normal ``up``) into three components, each computed separately
+with unit brightness (:data:`COMPONENTS`):
 
 * ``"sky"``: every direction ``d`` with ``up·d > 0`` has radiance 1 W/m²/sr in each RGB channel (a Radiance
-  ``glow`` material of radiance (1, 1, 1) on a 180° ``source`` pointing up). A horizontal surface open to the whole
+  ``glow`` material of radiance (1, 1, 1) on a 180° ``source`` pointing up); a horizontal surface open to the whole
   upper hemisphere therefore receives ``π`` W/m².
-* ``"ground"``: the same for ``up·d < 0`` (source pointing down). There is no ground plane geometry: the lower
-  hemisphere itself glows, as in the paper's model.
+* ``"ground"``: the same for ``up·d < 0``; there is no ground plane geometry, the lower hemisphere itself glows.
 * ``"sun"``: a disk of 0.533° angular diameter in the direction ``sun_direction`` (unit vector from the scene
-  towards the sun), a Radiance ``light`` source whose radiance ``1/Ω`` (``Ω = 2π(1 − cos 0.2665°)``) makes its
-  *normal* irradiance 1 W/m²: an unshadowed surface receives ``cos(incidence)`` directly. By default shadows are
-  cast from the disk centre (sharp); ``sun_disk_samples=k`` tiles the disk with ``k`` sub-suns for penumbrae.
+  towards the sun), a Radiance ``light`` of radiance ``1/Ω`` (``Ω = 2π(1 − cos 0.2665°)``), i.e. *normal*
+  irradiance 1 W/m²; shadows from the disk centre (sharp) by default, ``sun_disk_samples=k`` sub-suns for penumbrae.
 
-The result is the RGB irradiance ``E`` (W/m², direct plus all inter-reflections up to ``ambient_bounces``) at
-points facing given normals; a Lambertian surface of reflectance ``ρ`` there has radiosity ``ρ·E`` and radiance
-``ρ·E/π``. Unit brightness makes it the paper's *normalized* quantity: scale by ``s_x`` to get component ``x``.
+Output: the RGB irradiance ``E`` (W/m², direct plus all inter-reflections up to ``ambient_bounces``) at points (map
+frame, metres) facing given unit normals; a Lambertian surface of reflectance ``ρ`` there has radiosity ``ρ·E``
+and radiance ``ρ·E/π``, the paper's *normalized* quantity: scale by ``s_x`` to get component ``x``.
 
-Scene translation: every triangle becomes a Radiance ``polygon`` with a ``plastic`` material (specularity 0,
-roughness 0, i.e. purely Lambertian) of the triangle's mean vertex reflectance (:attr:`ReflectanceMesh.
-face_reflectance`), one material per distinct reflectance rounded to 1e-4. Radiance polygons are two-sided while
-our triangles are one-sided; for closed rooms (only the inside is ever seen) that makes no difference. Query points
-are moved 1e-4 m along their normals so they do not start inside the surface they lie on.
-
-Ambient settings (the convergence study behind the defaults is in :data:`FIXED_RTRACE_OPTIONS`): no irradiance
-cache (``-aa 0``) and no super-sampling (``-as 0``), i.e. every point integrates its own hemisphere with ``-ad``
-stratified rays, each continued as a single path with Russian roulette, so results are unbiased Monte Carlo
-estimates (up to the ``-ab`` bounce limit) with no interpolation artefacts, but noisy on dark points (~5 % at the
-defaults): use ``repeats`` or :func:`radiance_irradiance_with_error`. The sky and ground are found only by ambient
-rays that leave the scene (the glow sources have no direct component), exactly as the light model defines them.
-(Window "portals", i.e. glow polygons in the opening with a direction filter that make the sky a direct source,
-were tried and rejected: Radiance's sampling of such large, near area sources was biased by up to 35 % on reveal
-points with ``-dj 0`` and far noisier than the ambient sampling with ``-dj 1``.)
-
-Radiance ships with the PyPI package ``pyradiance``; importing it sets ``RAYPATH`` and puts its ``bin`` folder on
-``PATH``. The binaries (``oconv``, ``rtrace``) are run as plain subprocesses.
+Scene translation: every triangle becomes a Radiance ``polygon`` with a purely Lambertian ``plastic`` material of
+the triangle's mean vertex reflectance (one material per distinct reflectance rounded to 1e-4; Radiance polygons
+are two-sided, which makes no difference in closed rooms). Query points are moved 1e-4 m along their normals.
+Ambient settings (:data:`FIXED_RTRACE_OPTIONS`): no irradiance cache (``-aa 0``), no super-sampling (``-as 0``),
+Russian roulette: unbiased Monte Carlo estimates per point (up to the ``-ab`` bounce limit) without interpolation
+artefacts, but noisy on dark points: use ``repeats`` or :func:`radiance_irradiance_with_error`. The sky and ground
+are found only by ambient rays that leave the scene, exactly as the light model defines them. Radiance ships with
+the PyPI package ``pyradiance`` (importing it sets ``RAYPATH`` and ``PATH``); ``oconv`` and ``rtrace`` are run as
+plain subprocesses. Design notes (rejected window portals, noise): docs/daylight.md.
 """
 from __future__ import annotations
 

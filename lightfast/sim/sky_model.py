@@ -1,42 +1,31 @@
 """Outdoor light for the ground-truth renderer: sun, a non-uniform sky and a ground glow, in physical units.
 
 This is the *truth* side of the daylight simulation, deliberately richer than the method's model of uniform
-directional light sets (§III-A of Krawez et al.): the sky brightness varies over the dome and with the sun.
+directional light sets (Krawez et al., RA-L 2021, §III-A): the sky brightness varies over the dome and with the sun.
+Radiance is in W m⁻² sr⁻¹, irradiance in W m⁻², per **linear RGB channel**; directions are unit vectors in the map
+frame (z up). A broadband value (DNI, DHI, GHI in W m⁻²) is split into channels by a colour vector of unit Rec. 709
+luminance ``0.2126 R + 0.7152 G + 0.0722 B``, so the luminance-weighted channel sum reproduces the broadband value.
 
-Units and colour
-----------------
-Radiance is in W m⁻² sr⁻¹, irradiance in W m⁻², per **linear RGB channel**. A "broadband" value (DNI, DHI, GHI in
-W m⁻²) is split into channels by a colour vector whose Rec. 709 luminance ``0.2126 R + 0.7152 G + 0.0722 B`` is 1,
-so the luminance-weighted channel sum reproduces the broadband value.
-
-Sky luminance distributions (ISO 15469 / CIE S 011:2003)
----------------------------------------------------------
-Relative luminance of a sky element at zenith angle ``Z`` whose angular distance from the sun is ``χ``, the sun at
-zenith angle ``Zs``::
+Sky luminance distributions (ISO 15469 / CIE S 011:2003): relative luminance of a sky element at zenith angle ``Z``
+whose angular distance from the sun is ``χ``, the sun at zenith angle ``Zs``::
 
     L(Z, χ) / Lz = f(χ) φ(Z) / (f(Zs) φ(0)),   φ(Z) = 1 + a exp(b / cos Z),
     f(χ) = 1 + c (exp(d χ) - exp(d π/2)) + e cos² χ.
 
-:data:`CIE_CLEAR_SKY` is the CIE standard general sky type 12 ("CIE standard clear sky, low luminance
-turbidity": a = -1, b = -0.32, c = 10, d = -3, e = 0.45; the same function as Radiance's ``gensky +s``). The
-overcast component is the CIE standard overcast sky (Moon & Spencer), ``L(Z) ∝ (1 + 2 cos Z) / 3``. A distribution
-is normalized so that the sky's diffuse horizontal irradiance equals a given DHI: ``L = DHI · F(ω) / ∫ F cos Z dω``,
-the integral over the upper hemisphere evaluated numerically on a 180 × 360 midpoint grid (error < 0.1 %).
-For tests, :data:`UNIFORM_SKY` has ``F ≡ 1`` (``L = DHI / π``).
+:data:`CIE_CLEAR_SKY` is the CIE standard general sky type 12 ("CIE standard clear sky, low luminance turbidity":
+a = -1, b = -0.32, c = 10, d = -3, e = 0.45; the same function as Radiance's ``gensky +s``); the overcast component
+is the CIE standard overcast sky (Moon & Spencer), ``L(Z) ∝ (1 + 2 cos Z) / 3``; for tests, :data:`UNIFORM_SKY` has
+``F ≡ 1`` (``L = DHI / π``). A distribution is normalized so that the sky's diffuse horizontal irradiance equals a
+given DHI: ``L = DHI · F(ω) / ∫ F cos Z dω``, the integral over the upper hemisphere on a 180 × 360 midpoint grid.
 
 Ground: no outdoor geometry; directions below the horizon see a uniform Lambertian ground of radiance
-``L_grd = albedo · GHI / π`` per channel.
-
-Sun: a disk of angular radius :data:`SUN_ANGULAR_RADIUS_RAD` with the direct normal irradiance DNI (the irradiance
-on a plane facing the sun, the disk's integral). Clear-sky DNI and DHI come from pvlib's simplified Solis model
-(Ineichen 2008) for the apparent elevation; GHI is recomputed as ``DNI cos Zs + DHI`` so the parts add up.
-
-Colours (simple, documented choices — not spectral):
-
-* sun: Rayleigh + Ångström aerosol transmittance at 610/550/465 nm along the relative air mass (Kasten & Young),
-  normalized to unit luminance: white-ish at noon, orange near the horizon;
-* clear sky: :data:`CLEAR_SKY_RGB` (bluish); overcast sky :data:`OVERCAST_SKY_RGB` (neutral, a touch blue);
-* ground: albedo :data:`GROUND_ALBEDO_RGB` (grass/pavement mix, mean ≈ 0.2).
+``L_grd = albedo · GHI / π`` per channel (:data:`GROUND_ALBEDO_RGB`, grass/pavement mix). Sun: a disk of angular
+radius :data:`SUN_ANGULAR_RADIUS_RAD` with the direct normal irradiance DNI (the disk's integral on a plane facing
+the sun). Clear-sky DNI and DHI come from pvlib's simplified Solis model (Ineichen 2008) for the apparent elevation;
+GHI = ``DNI cos Zs + DHI`` so the parts add up. Colours (simple, documented choices, not spectral): the sun from
+Rayleigh + Ångström aerosol transmittance at 610/550/465 nm along the relative air mass (Kasten & Young), normalized
+to unit luminance (white-ish at noon, orange near the horizon); :data:`CLEAR_SKY_RGB` (bluish) and
+:data:`OVERCAST_SKY_RGB` (neutral, a touch blue) for the skies.
 """
 from __future__ import annotations
 

@@ -1,17 +1,23 @@
 """Colour-constant stereo visual teach & repeat (paper: "It's Not Easy Seeing Green", §III–IV). ROS-free.
 
-* :mod:`lightfast.vtr.color_constant` — colour-constant images F = log R2 − α log R1 − β log R3 (§III Eq. 6–7,
+* :mod:`~lightfast.vtr.color_constant` — colour-constant images F = log R2 − α log R1 − β log R3 (§III Eq. 6–7,
   §IV-A Eq. 10–12): F_v, F_r, the constrained peak image, greyscale, and their 8-bit mapping;
-* :mod:`lightfast.vtr.stereo` — the per-source stereo front end of §IV-B (Fig. 3–4): features, left–right matching
-  on rectified images, triangulation from ``camera_info`` projection matrices;
-* :mod:`lightfast.vtr.visual_odometry` — greyscale stereo VO and the pose solver shared with localization (§IV-B,
-  Fig. 3): guided matching, 3-point RANSAC scored by stereo reprojection, Levenberg–Marquardt refinement;
-* :mod:`lightfast.vtr.map_store` — the teach map (keyframes with the landmarks of every source, VO edges) and its
+* the per-source stereo front end of §IV-B (Fig. 3–4): :mod:`~lightfast.vtr.stereo_config` (its options),
+  :mod:`~lightfast.vtr.features` (keypoints, stereo landmarks, detection), :mod:`~lightfast.vtr.descriptor_matching`
+  (descriptor distances, nearest-neighbour matching), :mod:`~lightfast.vtr.stereo_matching` (left–right row search
+  or descriptor matching, sub-pixel disparities), :mod:`~lightfast.vtr.stereo_front_end` (triangulation from
+  ``camera_info`` projection matrices, :class:`StereoFrontEnd`);
+* the pose pipeline shared by VO and localization (§IV-B, Fig. 3): :mod:`~lightfast.vtr.landmark_matching` (guided
+  matching), :mod:`~lightfast.vtr.pose_estimation` (3-point RANSAC scored by stereo reprojection,
+  Levenberg–Marquardt refinement), :mod:`~lightfast.vtr.visual_odometry` (greyscale frame-to-frame VO);
+* :mod:`~lightfast.vtr.map_store` — the teach map (keyframes with the landmarks of every source, VO edges) and its
   versioned, atomically written map directory;
-* :mod:`lightfast.vtr.teach` — the teach phase (§IV-B): :class:`TeachPipeline`;
-* :mod:`lightfast.vtr.repeat` — the repeat phase (§IV-B, IV-C): VO, windowed localization with fused sources,
-  failure after 20 m on VO and whole-map search; modes ``fused``, ``grey``, ``mcmanus``: :class:`RepeatPipeline`;
-* :mod:`lightfast.vtr.localizer_config` — the parameters of ``vtr_localizer_node``: :class:`VtrLocalizerConfig`.
+* :mod:`~lightfast.vtr.teach` — the teach phase (§IV-B): :class:`TeachPipeline`;
+* the repeat phase (§IV-B, IV-C): :mod:`~lightfast.vtr.repeat_config` (options, modes ``fused``, ``grey``,
+  ``mcmanus``), :mod:`~lightfast.vtr.localization` (windowed localization with fused sources),
+  :mod:`~lightfast.vtr.map_search` (whole-map search), :mod:`~lightfast.vtr.repeat` (:class:`RepeatPipeline`: VO,
+  localization, failure after 20 m on VO);
+* :mod:`~lightfast.vtr.localizer_config` — the parameters of ``vtr_localizer_node``: :class:`VtrLocalizerConfig`.
 """
 from __future__ import annotations
 
@@ -30,6 +36,7 @@ from lightfast.vtr.color_constant import (
     temperature_beta,
     to_uint8,
 )
+from lightfast.vtr.descriptor_matching import descriptor_distances, match_descriptors, pair_distances
 from lightfast.vtr.errors import (
     MapCorruptError,
     MapError,
@@ -40,39 +47,19 @@ from lightfast.vtr.errors import (
     VtrInputError,
     VtrStateError,
 )
+from lightfast.vtr.features import FeatureExtractor, Features, StereoFeatures
+from lightfast.vtr.landmark_matching import match_landmarks
+from lightfast.vtr.localization import Localization, MapLocalizer
 from lightfast.vtr.localizer_config import PHASES, VtrLocalizerConfig
 from lightfast.vtr.map_store import MAP_FORMAT, MAP_VERSION, Edge, Keyframe, Landmarks, MapStore, MapWriter, TeachMap
-from lightfast.vtr.repeat import MODES, Localization, MapLocalizer, RepeatConfig, RepeatPipeline, RepeatResult
-from lightfast.vtr.stereo import (
-    FEATURE_CHOICE,
-    FEATURE_TYPES,
-    FeatureExtractor,
-    Features,
-    StereoConfig,
-    StereoFeatures,
-    StereoFrontEnd,
-    check_projection,
-    check_stereo_pair,
-    descriptor_distances,
-    match_descriptors,
-    match_stereo,
-    pair_distances,
-    refine_disparity,
-    search_stereo,
-    stereo_candidates,
-    triangulate,
-)
+from lightfast.vtr.pose_estimation import PoseEstimate, StereoCamera, estimate_pose_stereo, refine_pose_stereo
+from lightfast.vtr.repeat import RepeatPipeline, RepeatResult
+from lightfast.vtr.repeat_config import MODES, RepeatConfig
+from lightfast.vtr.stereo_config import FEATURE_CHOICE, FEATURE_TYPES, StereoConfig
+from lightfast.vtr.stereo_front_end import StereoFrontEnd, check_projection, check_stereo_pair, triangulate
+from lightfast.vtr.stereo_matching import match_stereo, refine_disparity, search_stereo, stereo_candidates
 from lightfast.vtr.teach import SourceFrontEnd, TeachConfig, TeachPipeline, TeachResult
-from lightfast.vtr.visual_odometry import (
-    PoseEstimate,
-    StereoCamera,
-    VisualOdometry,
-    VisualOdometryConfig,
-    VoResult,
-    estimate_pose_stereo,
-    match_landmarks,
-    refine_pose_stereo,
-)
+from lightfast.vtr.visual_odometry import VisualOdometry, VisualOdometryConfig, VoResult
 
 __all__ = [
     "FEATURE_CHOICE",

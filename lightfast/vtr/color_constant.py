@@ -1,81 +1,32 @@
 """Colour-constant greyscale images from an RGB camera: paper §III (Eq. 1–7, 10) and §IV-A (Eq. 11–12, Tables II–III).
 
-Model (§III). With infinitely narrow channel sensitivities at the peak wavelengths λ_i and a black-body illuminant
-in Wien's approximation, the log response of channel i at a pixel is (Eq. 5)
-
-    log R_i = log(a·n I) + log(S(λ_i) C1 λ_i⁻⁵) − C2 / (T λ_i),
-
-the sum of an illuminant-intensity/geometry term (the same for every channel), a surface term and a colour-
-temperature term. The image is the weighted log difference (Eq. 6)
+Model (§III, Eq. 5): with narrow channel sensitivities at peak wavelengths λ_i and a black-body illuminant (Wien),
+log R_i = log(a·n I) + log(S(λ_i) C1 λ_i⁻⁵) − C2 / (T λ_i). The image is the weighted log difference (Eq. 6)
 
     F = log R2 − α log R1 − β log R3                                                        (implemented form)
 
-with R1, R2, R3 the responses ordered by wavelength: **blue, green, red**. Our inputs are ``rgb8``, so R1 is channel
-2, R2 channel 1 and R3 channel 0.
+with R1, R2, R3 the responses ordered by wavelength: **blue, green, red** (rgb8 input: channels 2, 1, 0). The paper
+prints "+β"; only "−β" cancels the illuminant intensity under its constraints (Eq. 7: 1/λ2 = α/λ1 + β/λ3 and
+β = 1 − α), so "−β" is implemented (tested by scaling all channels).
 
-The sign of β
--------------
-Eq. 6 and Eq. 11–12 are printed with "+β log R3". Substituting Eq. 5, F contains the intensity term with the
-factor (1 − α + β) under "+β" but (1 − α − β) under "−β", and the temperature term with the factor
-−C2/T·(1/λ2 − α/λ1 ∓ β/λ3). The constraints the paper states (Eq. 7: 1/λ2 = α/λ1 + β/λ3 and β = 1 − α) make both
-factors vanish only for **"−β"**: with "+β" and β = 1 − α the intensity survives with exponent 2 − 2α (scaling the
-three channels by k adds (2 − 2α) log k to F). The "−β" form is also that of the illumination-invariant image of
-Maddern et al. [9], log G − α log B − (1 − α) log R, which builds on [14], and the only one consistent with Eq. 10
-and the tabulated weights (see below). So
-"+β" is a typesetting error and F = log R2 − α log R1 − β log R3 is implemented (tested by scaling all channels).
+* F_v (α 0.29, β 0.77, Eq. 11) and F_r (α −1.3, β 2.9, Eq. 12): the paper's weights keep the colour-temperature
+  constraint (Eq. 10, :func:`temperature_beta`) but not β = 1 − α, so the illuminant intensity survives with
+  exponent 1 − α − β (:func:`illuminant_exponent`: −0.06 for F_v, −0.6 for F_r);
+* the fully constrained **peak** image (Eq. 7, :func:`constrained_weights`, from the configured wavelengths);
+* greyscale: Rec. 601 luma (``cv2.COLOR_RGB2GRAY``) by default, ``grey="green"`` the green channel (Fig. 1).
 
-The paper's weights (checked numerically here)
-----------------------------------------------
-* Eq. 10 keeps the colour-temperature constraint and drops β = 1 − α: β = λ3 (1/λ2 − α/λ1). With the peak
-  wavelengths of Table II (460, 530, 615 nm): α = 0.29 → β = 0.773 (paper: **F_v**, β_v = 0.77) and α = −1.3 →
-  β = 2.898 (paper: **F_r**, β_r = 2.9). So F_v and F_r satisfy the temperature constraint of Eq. 7 and violate
-  the intensity constraint: the illuminant intensity survives with exponent 1 − α − β, i.e. −0.06 for F_v (a
-  factor-10 brightness change shifts F_v by 0.14, against 2.3 for log grey) and −0.6 for F_r (F_r keeps 60 % of
-  the log intensity, inverted). They are therefore *not* invariant to shading and exposure — by design of the
-  paper's training (§IV-A: "no longer guarantees that the intensity of the illuminant ... is cancelled out").
-  :func:`illuminant_exponent` returns 1 − α − β.
-* The fully constrained **peak** image (Eq. 7 with both constraints) has α = (1/λ2 − 1/λ3) / (1/λ1 − 1/λ3),
-  β = 1 − α (:func:`constrained_weights`). For 460/530/615 nm this gives α = 0.476, β = 0.524; Table III prints
-  0.42/0.58 for these wavelengths, which does not satisfy its own Eq. 7 (1/530 = 0.001887 against
-  0.42/460 + 0.58/615 = 0.001856), while the table's F'_v (402/544/635 nm → α = 0.289) and F'_r (728/544/635 nm →
-  α = −1.310, β = 2.31) rows do. The weights are computed from the configured wavelengths here.
-* Greyscale: Rec. 601 luma (``cv2.COLOR_RGB2GRAY``) by default; ``grey="green"`` uses the green channel, the
-  "image formed from the green channel" of the paper's Fig. 1.
+Inputs: (H, W, 3) rgb images, uint8 or float (``saturation_level`` is the top of the range). A pixel is invalid when
+any channel is below ``min_valid``, at or above ``saturation_level`` or not finite; invalid pixels get the F of a
+neutral grey at the middle of the log range and are reported in a mask — nothing NaN or infinite leaves this module.
+Outputs: F (float32, natural-log units) with its mask (:class:`ColorConstantImage`, :func:`color_constant`), and the
+8-bit images with masks for feature extraction (:class:`SourceImage`, :func:`image_sources`, :func:`to_uint8`).
 
-Invalid pixels
---------------
-A pixel is invalid when any channel is below ``min_valid`` (zero: log undefined; with the default 1.0 only exact
-zeros of 8-bit input) or at/above ``saturation_level`` (a clipped channel makes the channel ratios, hence F, wrong),
-or not finite (float input). Invalid pixels get the finite value F of a neutral grey at the middle of the log range,
-(1 − α − β)·(log m + log s)/2 (for the peak image: exactly the value every neutral pixel has, so a blown-out white
-sky next to grey stone makes no edge), and are reported in a mask; nothing NaN or infinite leaves this module.
-
-Mapping to 8 bit (for feature extraction)
------------------------------------------
-Default ``normalization="fixed"``: one affine map per (α, β), the same for every image. Writing
-F = (1 − α − β) log R2 + α log(R2/R1) + β log(R2/R3), it follows from the valid 8-bit log range log R2 ∈
-[log m, log s] and an assumed range of the log channel ratios |log(R2/R1)|, |log(R2/R3)| ≤ c
-(``log_chroma_range``, default 0.5, i.e. a factor 1.65 between channels):
-
-    e = 1 − α − β,   lo = min(e log m, e log s) − (|α| + |β|) c,   hi = max(e log m, e log s) + (|α| + |β|) c
-
-(:func:`fixed_range`; m = ``min_valid``, s = ``saturation_level``), mapped linearly onto [0, 255] and clipped.
-Why fixed: the point of a colour-constant image is that the same surface gives the same value under any light; a
-fixed map keeps that property in 8 bit, so a surface gives the same grey level — and the same detector response — at
-noon and at dusk, and the teach and repeat images are mapped identically. Per-image normalization
-(``"percentile"``: the 1st/99th percentiles of the valid F of *this* image mapped to 0/255) re-introduces a
-lighting- and content-dependent gain and offset: when shadows move, the sky saturates or people walk by, every value
-of the image shifts. With c = 0.5 the 1st–99th percentile ranges of F_v, F_r and peak on the real webcam images of
-``../shared/data/webcam_timelapse`` (about [−0.45, 0.26], [−4.7, −0.8], [−0.15, 0.49]) lie inside their fixed ranges
-([−0.86, 0.53], [−5.42, 2.1], [−0.5, 0.5]) and use 30–50 % of the 8 bits, although single log ratios reach 0.98
-(log G/B; the ratios partly cancel in F); c = 1 halves the contrast. More saturated colours clip.
-
-Measured (``benchmarks/results/vtr_timelapse.md``, 2005 real image pairs, mean correct matches per pair, fixed vs
-percentile): with ORB (the default feature) the two are on par — F_v 2.9 vs 2.4, F_r 4.9 vs 6.0, peak 2.0 vs 1.7,
-fused grey ∪ F_v ∪ F_r 105.5 vs 106.1 — and c = 1 was worse than c = 0.5 in a preliminary run (fewer features at
-lower contrast). With SIFT the fixed map is clearly worse (F_r 1.4 vs 6.4): SIFT's contrast threshold is absolute
-and the wide fixed range of F_r (7.5 log units: its intensity term −0.6 log R2 spans the whole 8-bit log range)
-leaves few features; use ``"percentile"`` (or a lower ``sift_contrast_threshold``) with SIFT.
+Mapping to 8 bit: by default (``normalization="fixed"``) one affine map per (α, β), the same for every image, so a
+surface gives the same grey level at noon and at dusk: with e = 1 − α − β, m = ``min_valid``, s =
+``saturation_level`` and c = ``log_chroma_range``, [lo, hi] = [min(e log m, e log s) − (|α| + |β|) c,
+max(e log m, e log s) + (|α| + |β|) c] (:func:`fixed_range`) goes linearly onto [0, 255], clipped.
+``"percentile"`` maps the 1st/99th percentiles of this image's valid F instead (prefer it with SIFT). The derivation,
+the check of the paper's weights and the measurements behind these choices: ``docs/vtr.md``.
 """
 from __future__ import annotations
 

@@ -2,9 +2,9 @@
 :class:`VtrLocalizerConfig`, from which the node's ROS parameters and ``config/vtr_localizer_node.yaml`` are
 generated. It holds the phase (``mode``: teach or repeat), the map directory, the node's frames and queue, and the
 core configurations as sections (dotted parameters, e.g. ``repeat.mode``, ``stereo.max_features``):
-:class:`~lightfast.vtr.teach.TeachConfig` (``teach``), :class:`~lightfast.vtr.stereo.StereoConfig` (``stereo``;
+:class:`~lightfast.vtr.teach.TeachConfig` (``teach``), :class:`~lightfast.vtr.stereo_config.StereoConfig` (``stereo``;
 teach only: a repeat uses the front-end options stored in the map, so that the features match) and
-:class:`~lightfast.vtr.repeat.RepeatConfig` (``repeat``), each defaulting to the core's own defaults.
+:class:`~lightfast.vtr.repeat_config.RepeatConfig` (``repeat``), each defaulting to the core's own defaults.
 
 The sections are read-only while the node runs (changing them would restart a teach or a repeat); the node-level
 options (queue, black-frame level, image publishing, VO drift for the covariance) may change.
@@ -15,8 +15,8 @@ from dataclasses import dataclass
 
 from lightfast.config import param
 from lightfast.node_options import SensorInputOptions, StampOptions
-from lightfast.vtr.repeat import RepeatConfig
-from lightfast.vtr.stereo import StereoConfig
+from lightfast.vtr.repeat_config import RepeatConfig
+from lightfast.vtr.stereo_config import StereoConfig
 from lightfast.vtr.teach import TeachConfig
 
 __all__ = ["PHASES", "VtrLocalizerConfig"]

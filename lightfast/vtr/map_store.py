@@ -3,7 +3,7 @@ contain independent sets of SURF features from all three image sources, linked b
 computed by VO").
 
 In memory: :class:`TeachMap` — keyframes (:class:`Keyframe`: per image source the landmarks of the keyframe's
-stereo pair, :class:`Landmarks`: left pixels, 3-D points in the keyframe's left camera frame, descriptors),
+stereo pair, :class:`Landmarks`: left pixels, 3-D points in the keyframe's left camera frame (m), descriptors),
 the edges between consecutive keyframes (:class:`Edge`, ``T_parent_child`` from greyscale VO), the keyframe poses
 chained from the first keyframe (``T_map_kf``, the "map" frame being the first keyframe's camera frame; only
 relative poses between nearby keyframes are meaningful, as in the paper's relative map), and the cumulative path
@@ -13,25 +13,20 @@ On disk (format ``lightfast-vtr-map``, :data:`MAP_VERSION` = 1), a directory::
 
     MAP/
       manifest.json           written last: format, version, camera, image sources, descriptor kind and size,
-                              configuration of the teach, and per keyframe its file, SHA-256, stamp, path
-                              distance, landmark counts per source, and the edge T_parent_child (4×4, row-major)
+                              teach configuration; per keyframe its file, SHA-256, stamp, path distance, landmark
+                              counts per source and the edge T_parent_child (4×4, row-major)
       staging.json            camera, sources and configuration, written first (lets a crashed teach be recovered)
       keyframes/kf_000000.npz one per keyframe (np.savez, no pickle): ``index``, ``stamp_ns``, ``T_parent_child``
                               and per source ``<s>_uv`` (N, 2) float32, ``<s>_points`` (N, 3) float64,
                               ``<s>_descriptors`` (N, D) uint8 (ORB) or float32 (SIFT)
 
-Atomicity (a crash mid-teach leaves the last complete map): :class:`MapWriter` builds the map under a temporary
-name beside the target (:func:`lightfast.io.atomic_directory`), writes every keyframe file atomically as it comes
-(:func:`lightfast.io.write_bytes_atomic`), writes the manifest last and only then moves the directory into place,
-replacing a previous map in one rename. Until :meth:`MapWriter.commit` a previous map at the path is untouched;
-an interrupted teach leaves only a hidden ``.MAP.*.partial`` directory, from which :meth:`MapStore.recover`
-rebuilds a map of the keyframes written so far.
-
-:meth:`MapStore.load` validates everything and refuses a bad map with a :class:`MapError`: no map
-(:class:`MapNotFoundError`: no directory or no manifest, e.g. a teach that never finished), another format or
-version (:class:`MapVersionError`), or anything inconsistent (:class:`MapCorruptError`: unreadable JSON, missing
-or truncated keyframe file, checksum mismatch, wrong array shapes, dtypes, counts, non-finite values, an edge that
-is not a rigid transform).
+Atomicity: :class:`MapWriter` builds the map beside the target (:func:`lightfast.io.atomic_directory`), writes
+each keyframe file atomically as it comes and the manifest last, then renames the directory into place, replacing
+a previous map (untouched until :meth:`MapWriter.commit`); an interrupted teach leaves a hidden ``.MAP.*.partial``
+directory, from which :meth:`MapStore.recover` rebuilds the keyframes written so far. :meth:`MapStore.load` refuses
+a bad map with a :class:`MapError`: :class:`MapNotFoundError` (no directory or manifest), :class:`MapVersionError`
+(another format or version), :class:`MapCorruptError` (unreadable JSON, missing or truncated keyframe file,
+checksum mismatch, wrong shapes, dtypes or counts, non-finite values, an edge that is not a rigid transform).
 """
 from __future__ import annotations
 
@@ -60,7 +55,9 @@ from lightfast.vtr.errors import (
     VtrInputError,
     VtrStateError,
 )
-from lightfast.vtr.stereo import FEATURE_TYPES, StereoFeatures, check_stereo_pair
+from lightfast.vtr.features import StereoFeatures
+from lightfast.vtr.stereo_config import FEATURE_TYPES
+from lightfast.vtr.stereo_front_end import check_stereo_pair
 
 __all__ = [
     "MAP_FORMAT",

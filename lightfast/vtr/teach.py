@@ -5,7 +5,7 @@ computed by VO").
 
 Per stereo frame (:meth:`TeachPipeline.step`, the call a node makes per synchronized pair):
 
-1. the stereo front end (:class:`SourceFrontEnd`, wrapping :class:`~lightfast.vtr.stereo.StereoFrontEnd`)
+1. the stereo front end (:class:`SourceFrontEnd`, wrapping :class:`~lightfast.vtr.stereo_front_end.StereoFrontEnd`)
    extracts, left–right matches and triangulates the landmarks of every image source (greyscale, F_v, F_r);
 2. frame-to-frame VO on greyscale (:class:`~lightfast.vtr.visual_odometry.VisualOdometry`) gives ``T_prev_cur``,
    chained into ``T_kf_cam``, the pose of the camera in the last keyframe;
@@ -39,9 +39,12 @@ from numpy.typing import ArrayLike, NDArray
 from lightfast.config import Config, ConfigError, param
 from lightfast.vtr.color_constant import SOURCES, ColorConstantConfig, image_sources
 from lightfast.vtr.errors import MapExistsError, VtrInputError, VtrStateError
+from lightfast.vtr.features import FeatureExtractor, StereoFeatures
 from lightfast.vtr.map_store import Landmarks, MapStore, MapWriter, TeachMap
-from lightfast.vtr.stereo import FeatureExtractor, StereoConfig, StereoFeatures, StereoFrontEnd, check_stereo_pair
-from lightfast.vtr.visual_odometry import StereoCamera, VisualOdometry, VisualOdometryConfig
+from lightfast.vtr.pose_estimation import StereoCamera
+from lightfast.vtr.stereo_config import StereoConfig
+from lightfast.vtr.stereo_front_end import StereoFrontEnd, check_stereo_pair
+from lightfast.vtr.visual_odometry import VisualOdometry, VisualOdometryConfig
 
 __all__ = [
     "PendingFeatures",
@@ -88,7 +91,7 @@ def rotation_deg(T: NDArray[np.float64]) -> float:
 
 class SourceFrontEnd:
     """The per-source stereo front end of Fig. 4 for both pipelines: one
-    :class:`~lightfast.vtr.stereo.StereoFrontEnd` per image source, computed on demand (:meth:`process` with a
+    :class:`~lightfast.vtr.stereo_front_end.StereoFrontEnd` per image source, computed on demand (:meth:`process` with a
     subset of the sources).
 
     With ``workers > 1`` a thread pool runs the six feature detections of a three-source stereo frame (OpenCV's

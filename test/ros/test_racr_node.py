@@ -44,8 +44,8 @@ from lightfast.ros.qos import OUTPUT_QOS
 from lightfast.ros.racr_msgs import matrix_to_transform_stamped, transform_stamped_to_matrix
 from lightfast.ros.racr_tools import pose7_to_matrix
 from lightfast.ros.spin import spin_until
+from lightfast.sim.racr import generate_racr_set, load_scene
 from lightfast.sim.racr_live import evaluate_final_pose
-from lightfast.sim.racr_scenes import generate_racr_set, load_scene
 from lightfast.topics import (
     PLATFORM_BASE_FRAME,
     PLATFORM_HAND_FRAME,

@@ -193,7 +193,7 @@ def test_when_f2m_falls_behind_the_newest_reference_is_refined(start_nodes, scen
         ref_rgb, ref_depth = scene.render(pose_of(probe.got["coarse"][stamp(i)]))
         refs[i] = (numpy_to_image(ref_rgb, "rgb8", stamp_ns=stamp(i), frame_id=OPTICAL_FRAME),
                    numpy_to_image(ref_depth, "32FC1", stamp_ns=stamp(i), frame_id=OPTICAL_FRAME))
-    with tracker._state:  # the f2m worker is busy: references pile up
+    with tracker.session.lock:  # the f2m worker is busy: references pile up
         probe.publish("ref_color", refs[1][0])
         probe.publish("ref_depth", refs[1][1])
         # the worker takes reference 1 and waits for the state; 2 and 3 then wait behind it

@@ -6,9 +6,9 @@ import yaml
 
 from lightfast.camera import PinholeCamera
 from lightfast.daylight.crf import CameraResponse
-from lightfast.sim.daylight_recordings import _camera_yaml
-from lightfast.sim.gt_renderer import CameraResponse as SimCameraResponse
-from lightfast.sim.gt_renderer import DepthSensor
+from lightfast.sim.daylight.recordings import _camera_yaml
+from lightfast.sim.daylight.sensors import CameraResponse as SimCameraResponse
+from lightfast.sim.daylight.sensors import DepthSensor
 
 
 @pytest.fixture(scope="module")

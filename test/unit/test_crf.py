@@ -10,9 +10,9 @@ from lightfast.camera import PinholeCamera
 from lightfast.daylight.crf import CameraResponse, calibrate_from_bracket, calibrate_from_files, load_crf, save_crf
 from lightfast.daylight.errors import CrfError
 from lightfast.errors import LightfastError
-from lightfast.sim.daylight_recordings import _camera_yaml
-from lightfast.sim.gt_renderer import CameraResponse as SimCameraResponse
-from lightfast.sim.gt_renderer import DepthSensor
+from lightfast.sim.daylight.recordings import _camera_yaml
+from lightfast.sim.daylight.sensors import CameraResponse as SimCameraResponse
+from lightfast.sim.daylight.sensors import DepthSensor
 
 SHOULDER = 0.5
 

@@ -15,23 +15,14 @@ from lightfast.camera import PinholeCamera
 from lightfast.daylight.mesh import ReflectanceMesh, as_mesh, merge_meshes
 from lightfast.daylight.sun import FREIBURG, sun_position
 from lightfast.ros.convert import image_to_numpy, pose_stamped_to_matrix, stamp_to_ns
-from lightfast.sim.daylight_recordings import (
-    COLOR_TOPIC,
-    DEPTH_TOPIC,
-    GT_POSE_TOPIC,
-    camera_for_size,
-    cloud_transmittance,
-    generate_daylight_set,
-    hand_held_trajectory,
-)
-from lightfast.sim.daylight_scene import RHO_MAX, RHO_MIN, make_ds1, make_ds2
-from lightfast.sim.gt_renderer import (
-    CacheSettings,
-    CameraResponse,
-    DepthSensor,
-    GroundTruthRenderer,
-    IrradianceCache,
-)
+from lightfast.sim.daylight.irradiance_cache import CacheSettings, IrradianceCache
+from lightfast.sim.daylight.recordings import COLOR_TOPIC, DEPTH_TOPIC, GT_POSE_TOPIC, generate_daylight_set
+from lightfast.sim.daylight.renderer import GroundTruthRenderer
+from lightfast.sim.daylight.rooms import make_ds1, make_ds2
+from lightfast.sim.daylight.scene import RHO_MAX, RHO_MIN
+from lightfast.sim.daylight.sensors import CameraResponse, DepthSensor
+from lightfast.sim.daylight.sequences import camera_for_size, cloud_transmittance
+from lightfast.sim.daylight.trajectory import hand_held_trajectory
 from lightfast.sim.sky_model import (
     CIE_CLEAR_SKY,
     SUN_ANGULAR_RADIUS_RAD,
@@ -391,7 +382,7 @@ def test_depth_sensor_noise_is_spatially_correlated_and_distortion_systematic() 
 
 
 def test_depth_camera_poses_lag_the_colour_camera() -> None:
-    from lightfast.sim.daylight_recordings import depth_camera_poses
+    from lightfast.sim.daylight.trajectory import depth_camera_poses
 
     poses = np.repeat(np.eye(4)[None], 5, axis=0)
     poses[:, 0, 3] = 0.3 * np.arange(5) / 30.0  # 0.3 m/s along x at 30 Hz

@@ -12,8 +12,8 @@ from lightfast import cli
 from lightfast.daylight.lighting_map import LightingMapConfig
 from lightfast.eval.daylight import evaluate_daylight, table_markdown
 from lightfast.eval.errors import EvalError
-from lightfast.sim.daylight_recordings import generate_daylight_set
-from lightfast.sim.gt_renderer import CacheSettings
+from lightfast.sim.daylight.irradiance_cache import CacheSettings
+from lightfast.sim.daylight.recordings import generate_daylight_set
 
 TINY_CACHE = CacheSettings(hemisphere_samples=8, window_samples=4, sunlit_samples=4, sun_disk_samples=4, bounces=3,
                            filter_radius_m=0.3)

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from lightfast.sim.daylight_scene import make_ds2
+from lightfast.sim.daylight.rooms import make_ds2
 from lightfast.sim.map_reconstruction import ReconstructionSettings, reconstruct_map, scan_poses
 
 
@@ -45,7 +45,7 @@ def test_reconstructed_map_is_near_the_true_surface_but_not_it() -> None:
 
 
 def test_scene_files_reconstruct_once(tmp_path) -> None:
-    from lightfast.sim.daylight_recordings import _scene_files
+    from lightfast.sim.daylight.recordings import _scene_files
 
     scene = make_ds2(resolution_m=0.3)
     first = _scene_files(tmp_path, scene)

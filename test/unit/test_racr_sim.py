@@ -18,8 +18,7 @@ from lightfast.geometry import inverse, make_transform, rotation_angle_deg, so3_
 from lightfast.racr.errors import ReferenceFileError
 from lightfast.racr.reference import REFERENCE_FORMAT, load_reference, write_reference
 from lightfast.sim.errors import PlatformError, RacrSimError
-from lightfast.sim.racr_platform import PlatformConfig, PlatformSimulator, VseConfig, motion_duration_s
-from lightfast.sim.racr_scenes import (
+from lightfast.sim.racr import (
     build_scene,
     camera_for_size,
     generate_racr_set,
@@ -28,6 +27,7 @@ from lightfast.sim.racr_scenes import (
     scene_specs,
     write_scene,
 )
+from lightfast.sim.racr_platform import PlatformConfig, PlatformSimulator, VseConfig, motion_duration_s
 
 TINY = {"width": 96, "height": 72, "resolution_m": 0.012}
 

@@ -233,7 +233,7 @@ def _reference_terms(src, tgt, T, cfg, use_color, use_depth):
 @pytest.mark.parametrize("use_color,use_depth", [(True, True), (True, False), (False, True)])
 def test_fused_kernel_matches_numpy_normal_equations(scenes, use_color, use_depth, term):
     from lightfast.tracking import prepare_frame
-    from lightfast.tracking.rgbd_odometry import _linearize
+    from lightfast.tracking.rgbd_odometry.kernels import _linearize
 
     a, b = scenes.frame(0), scenes.frame(5)
     src = prepare_frame(b.rgb, b.depth_mm / 1000.0, scenes.camera, config=FAST)

@@ -1,4 +1,4 @@
-"""The spectral outdoor VT&R recordings (lightfast.sim.vtr_route, lightfast.sim.vtr_recordings): determinism,
+"""The spectral outdoor VT&R recordings (lightfast.sim.vtr): determinism,
 rectified stereo geometry, bluish shadows, departure from the narrow-band Planckian model, bags and truth files,
 rendering speed. Kept fast: a 30 m test route, small images, few frames."""
 from __future__ import annotations
@@ -14,7 +14,10 @@ import pytest
 from lightfast import cli
 from lightfast.bag import open_bag
 from lightfast.ros.convert import camera_from_camera_info, image_to_numpy, pose_stamped_to_matrix
-from lightfast.sim.vtr_recordings import (
+from lightfast.sim.vtr.build import build_route_scene, flat_test_scene
+from lightfast.sim.vtr.camera import AutoExposure, SensorModel, StereoRig
+from lightfast.sim.vtr.light import daylight_illumination, solar_spectra
+from lightfast.sim.vtr.recordings import (
     DEFAULT_RUNS,
     LEFT_IMAGE_TOPIC,
     LEFT_INFO_TOPIC,
@@ -28,23 +31,15 @@ from lightfast.sim.vtr_recordings import (
     generate_vtr_set,
     load_schedule,
 )
-from lightfast.sim.vtr_route import (
+from lightfast.sim.vtr.renderer import SpectralRenderer
+from lightfast.sim.vtr.scene import RouteConfig, base_pose
+from lightfast.sim.vtr.spectra import (
     BASIS,
     WAVELENGTHS_NM,
-    AutoExposure,
-    RouteConfig,
-    SensorModel,
-    SpectralRenderer,
-    StereoRig,
-    base_pose,
-    build_route_scene,
     camera_response,
     camera_sensitivities,
-    daylight_illumination,
-    flat_test_scene,
     material_spectra,
     planck,
-    solar_spectra,
     spectrum_cct,
 )
 from lightfast.topics import GT_POSE_TOPIC

@@ -25,7 +25,7 @@ from lightfast.eval.racr import (
     run_one,
 )
 from lightfast.geometry import rotation_angle_deg
-from lightfast.sim.racr_scenes import generate_racr_set, load_scene
+from lightfast.sim.racr import generate_racr_set, load_scene
 
 pytestmark = pytest.mark.slow
 

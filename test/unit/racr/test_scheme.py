@@ -268,7 +268,7 @@ def test_an_unexpected_error_in_the_thread_surfaces_on_the_caller_side(scene, re
     def broken(*args, **kwargs):
         raise RuntimeError("bug in the aligner")
 
-    monkeypatch.setattr("lightfast.racr.scheme.fast_align", broken)
+    monkeypatch.setattr("lightfast.racr.alignment_job.fast_align", broken)
     platform, vse = Platform(), Vse(scene)
     scheme = RacrScheme(reference, T_REF_CAM, X_EST).start()
     try:

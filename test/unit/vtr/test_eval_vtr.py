@@ -15,8 +15,9 @@ import pytest
 from lightfast import cli
 from lightfast.eval.errors import VtrEvalError
 from lightfast.eval.vtr import FrameRecord, RepeatRun, cdf, evaluate_vtr, overall
-from lightfast.sim.vtr_recordings import DriveConfig, RunSpec, generate_vtr_set
-from lightfast.sim.vtr_route import RouteConfig, StereoRig
+from lightfast.sim.vtr.camera import StereoRig
+from lightfast.sim.vtr.recordings import DriveConfig, RunSpec, generate_vtr_set
+from lightfast.sim.vtr.scene import RouteConfig
 
 
 def _frame(i: int, step: float, *, localized: bool, failure: bool = False, vo_truth: float = 0.0) -> FrameRecord:

@@ -1,5 +1,5 @@
-"""Tests of the stereo front end of paper §IV-B (Fig. 3–4) in :mod:`lightfast.vtr.stereo`: features per source,
-left–right matching under the epipolar and disparity constraints, triangulation from camera_info P matrices."""
+"""Tests of the stereo front end of paper §IV-B (Fig. 3–4) in :mod:`lightfast.vtr.stereo_front_end`: features per
+source, left–right matching under the epipolar and disparity constraints, triangulation from camera_info P matrices."""
 from __future__ import annotations
 
 import cv2
@@ -20,7 +20,8 @@ from lightfast.vtr import (
     search_stereo,
     triangulate,
 )
-from lightfast.vtr.stereo import pair_distances, stereo_candidates
+from lightfast.vtr.descriptor_matching import pair_distances
+from lightfast.vtr.stereo_matching import stereo_candidates
 
 W, H, F, B, CX, CY = 640, 480, 400.0, 0.24, 320.0, 240.0
 P_LEFT = np.array([[F, 0, CX, 0], [0, F, CY, 0], [0, 0, 1, 0]])

@@ -369,7 +369,7 @@ def test_distance_consistent_sampling_finds_a_few_inliers_among_many_matches():
 def test_prosac_sampling_draws_the_most_distinctive_matches_first():
     """PROSAC's schedule: hypothesis t holds the n-th best match and two better ones, n growing; with few matches
     no set size gets more hypotheses than it has distinct triples."""
-    from lightfast.vtr.visual_odometry import _ProsacTriples
+    from lightfast.vtr.pose_estimation import _ProsacTriples
 
     quality = np.random.default_rng(5).permutation(10).astype(float)  # match i has rank quality[i]
     sampler = _ProsacTriples(quality)
@@ -404,7 +404,7 @@ def test_radius_pairs_equal_the_kd_tree_pairs():
     reference), with points outside the image, NaN predictions and an empty side."""
     from scipy.spatial import cKDTree
 
-    from lightfast.vtr.visual_odometry import radius_pairs
+    from lightfast.vtr.landmark_matching import radius_pairs
 
     rng = np.random.default_rng(4)
     a = np.c_[rng.uniform(-80, 720, 3000), rng.uniform(-80, 560, 3000)]
@@ -556,7 +556,7 @@ def test_failure_after_distance_on_vo_then_whole_map_search(taught: Taught, repe
 @pytest.mark.parametrize("radius", [0, 2])
 def test_whole_map_search_with_keyframe_windows(taught: Taught, repeat_features, radius: int):
     """The kidnapped search tries every keyframe with its ``search_window_radius`` neighbours and relocalizes."""
-    from lightfast.vtr.repeat import MapLocalizer
+    from lightfast.vtr.localization import MapLocalizer
 
     rp = RepeatPipeline(taught.teach_map, _repeat_config("fused", search_window_radius=radius))
     windows = []
@@ -579,8 +579,8 @@ def test_whole_map_search_with_keyframe_windows(taught: Taught, repeat_features,
 def test_whole_map_search_matches_each_keyframe_once_with_the_windows_matches(taught: Taught, repeat_features):
     """In the search every keyframe's landmarks are matched to the frame once and combined per window; the matches
     of every window are exactly those of matching the window's landmarks at once (as outside the search)."""
-    import lightfast.vtr.stereo as stereo_module
-    from lightfast.vtr.repeat import MapLocalizer
+    import lightfast.vtr.descriptor_matching as stereo_module
+    from lightfast.vtr.localization import MapLocalizer
 
     localizer = MapLocalizer(taught.teach_map, _repeat_config("fused", search_window_radius=2))
     features = repeat_features["changed"][12]

@@ -1,0 +1,102 @@
+"""The run record of ``lightfast eval racr`` (paper §5) and the per-run cache.
+
+A :class:`RunRecord` is one (scene, lighting, method, repeat) run: the final and the initial AFD (px, against the
+simulator's truth), success (AFD < 3 px), the adjustments, why the run stopped, the simulated loop and
+initialization time (s), the wall time (s), one :class:`TracePoint` per motion (simulated time in s, AFD in px, the
+camera's true position error in mm and rotation error in deg against the reference pose, rACR's gap g) and the
+method's details (scale and hand–eye errors, alignment counts).
+
+Cache: each record is a JSON file ``OUT/runs/<protocol hash>/<scene>_<lighting>_<method>_r<repeat>.json``
+(:func:`run_key`); :func:`load_records` reads them back, so an evaluation resumes without repeating a run and
+another protocol gets its own records.
+"""
+from __future__ import annotations
+
+import json
+import logging
+import math
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+from lightfast.eval.racr.protocol import AFD_SUCCESS_PX
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class TracePoint:
+    """State after one motion (or at the start, ``index`` 0): simulated loop time, the truth's AFD and camera
+    error, and rACR's own gap g of the motion just issued (NaN for ACR and the start)."""
+
+    index: int
+    time_s: float
+    afd_px: float
+    position_error_mm: float
+    rotation_error_deg: float
+    g: float = math.nan
+
+
+@dataclass
+class RunRecord:
+    """One (scene, lighting, method, repeat) run."""
+
+    scene: str
+    kind: str
+    lighting: str
+    method: str
+    repeat: int
+    protocol: str
+    afd_px: float
+    success: bool
+    afd_initial_px: float
+    adjustments: int
+    converged: bool
+    stop_reason: str
+    time_loop_s: float
+    time_init_s: float
+    wall_s: float
+    trace: list[TracePoint] = field(default_factory=list)
+    details: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def time_total_s(self) -> float:
+        return self.time_init_s + self.time_loop_s
+
+    @property
+    def time_to_success_s(self) -> float:
+        """Simulated loop time at which the truth's AFD first fell below 3 px (inf if never)."""
+        return next((p.time_s for p in self.trace if p.afd_px < AFD_SUCCESS_PX), math.inf)
+
+    @property
+    def key(self) -> str:
+        return run_key(self.scene, self.lighting, self.method, self.repeat)
+
+    def to_dict(self) -> dict[str, Any]:
+        d = asdict(self)
+        d["time_total_s"] = self.time_total_s
+        d["time_to_success_s"] = self.time_to_success_s
+        return d
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> RunRecord:
+        d = dict(d)
+        d.pop("time_total_s", None)
+        d.pop("time_to_success_s", None)
+        d["trace"] = [TracePoint(**t) for t in d.get("trace", [])]
+        return cls(**d)
+
+
+def run_key(scene: str, lighting: str, method: str, repeat: int) -> str:
+    return f"{scene}_{lighting}_{method}_r{repeat}"
+
+
+def load_records(out_dir: Path, protocol: str | None = None) -> list[RunRecord]:
+    """The run records in ``out_dir/runs/<protocol>/`` (every protocol's if None)."""
+    runs = []
+    for p in sorted((out_dir / "runs").glob(f"{protocol or '*'}/*.json")):
+        try:
+            runs.append(RunRecord.from_dict(json.loads(p.read_text())))
+        except (OSError, ValueError, TypeError) as exc:
+            log.warning("ignoring unreadable run record %s: %s", p, exc)
+    return runs

@@ -1,0 +1,103 @@
+"""Options of the repeat phase of colour-constant VT&R (paper §IV-B, IV-C): :class:`RepeatConfig` and the
+localization :data:`MODES`.
+
+Read by :class:`~lightfast.vtr.repeat.RepeatPipeline` (the window, the failure distance, the prior gate),
+:class:`~lightfast.vtr.localization.MapLocalizer` (matching, RANSAC and the success checks) and the whole-map search
+(:mod:`lightfast.vtr.map_search`); the ``repeat`` section of ``vtr_localizer_node``'s parameters
+(:mod:`lightfast.vtr.localizer_config`). Units: pixels of the rectified left image, metres, keyframe counts. The
+modes: ``fused`` (the paper's method, Fig. 4: the matches of all image sources in one RANSAC), ``grey`` (the legacy
+greyscale system [6]) and ``mcmanus`` (McManus et al. [10]: one image source at a time, greyscale favoured).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from lightfast.config import Config, param
+
+__all__ = ["MODES", "RepeatConfig"]
+
+#: Localization modes: the paper's fused method, the legacy greyscale system [6], McManus et al. [10].
+MODES = ("fused", "grey", "mcmanus")
+_COLOR_SOURCES = ("fv", "fr", "peak")
+
+
+@dataclass(frozen=True)
+class RepeatConfig(Config):
+    """Options of the repeat phase (paper §IV-B, IV-C)."""
+
+    mode: str = param("fused", description="Localization: fused (paper), grey (legacy [6]) or mcmanus ([10]).",
+                      choices=MODES)
+    window_radius: int = param(
+        2, description="Keyframes on each side of the expected nearest keyframe in the localization window.", min=0,
+        max=50,
+    )
+    search_window_radius: int = param(
+        2, description="Keyframes on each side of every candidate keyframe in the whole-map search (0: each keyframe "
+        "alone; 2, as window_radius, doubled the candidate matches at the start of the evening repeat07).", min=0,
+        max=50,
+    )
+    min_inliers: int = param(6, description="Fewest inliers for a successful localization (paper: 6).", min=4)
+    max_distance_on_vo_m: float = param(
+        20.0, description="Distance on VO alone after which a localization failure is declared (paper: 20 m), m.",
+        min=0.0,
+    )
+    match_radius_px: float = param(
+        40.0, description="Guided map matching: a keyframe landmark must project within this of the current "
+        "keypoint under the VO prior, px (0: unguided).", min=0.0,
+    )
+    ratio: float = param(0.9, description="Lowe ratio test of keyframe-to-frame matches (0.9: more candidates under "
+                         "changed lighting; the mutual check and RANSAC remove the extra wrong ones).", min=0.0,
+                         max=1.0)
+    mutual: bool = param(True, description="Keep only mutually nearest keyframe-to-frame matches.")
+    orb_max_distance: float = param(
+        80.0, description="ORB: largest Hamming distance of a keyframe-to-frame match (of 256 bits).", min=0.0
+    )
+    sift_max_distance: float = param(
+        300.0, description="SIFT: largest Euclidean distance of a keyframe-to-frame match.", min=0.0
+    )
+    ransac_threshold_px: float = param(
+        3.0, description="RANSAC inlier threshold on the stereo reprojection error (u, v, disparity), px (3: map "
+        "landmarks and live keypoints come from different stereo pairs, so their disparity errors add).", min=0.1,
+        max=100.0,
+    )
+    ransac_iterations: int = param(1000, description="Most RANSAC hypotheses.", min=10, max=100000)
+    ransac_confidence: float = param(0.999, description="RANSAC confidence (adaptive stop).", min=0.5,
+                                     max=0.999999)
+    ransac_consistent_fraction: float = param(
+        0.0, description="Share of RANSAC hypotheses drawn from distance-consistent triples of matches (the rest "
+        "uniformly): finds a few inliers among many matches (0.5 localized the first frame of the sunset repeat10, "
+        "but also found a wrong place 63 m off at the start of repeat07: off by default).", min=0.0, max=1.0,
+    )
+    ransac_ordered_fraction: float = param(
+        0.5, description="Unguided localizations (whole-map search, start window): share of RANSAC hypotheses drawn "
+        "by PROSAC's progressive sampling from the matches ordered by descriptor distance (the rest uniformly): the "
+        "correct matches concentrate among the closest when most are wrong (sunset repeat10's first frame localized "
+        "in 30 of 40 seeds, 9 of 40 uniformly). Not used with a prior: there it found more wrong poses (a second "
+        "simulated route, repeat07: 14 localizations > 1 m off vs 4).", min=0.0, max=1.0,
+    )
+    max_position_std_m: float = param(
+        0.5, description="A localization also needs its camera position constrained to this standard deviation "
+        "(nominal 1 px noise), m: rejects poses resting on far points only.", min=0.0,
+    )
+    prior_gate_m: float = param(
+        0.5, description="A windowed localization farther than prior_gate_m + prior_gate_per_m * (distance on VO) "
+        "from the VO prior is rejected, m (0: no gate).", min=0.0,
+    )
+    prior_gate_per_m: float = param(
+        0.1, description="Growth of the prior gate per metre driven on VO alone (allowed VO drift), m/m.", min=0.0,
+    )
+    confirm_beyond_gate_inliers: int = param(
+        30, description="Accept a windowed localization beyond the prior gate when it and the previous frame's, also "
+        "beyond the gate, have at least this many inliers and agree within prior_gate_m after the VO motion between "
+        "them: then the VO prior is the wrong one (in the cloudy evening repeat24 one VO step 1.8 m off made every "
+        "following localization, 45-108 inliers, fail the gate until the 20 m failure; with no inlier minimum, "
+        "consecutive wrong localizations of 13 inliers in the sand of repeat07 were accepted). 0: never.", min=0,
+    )
+    initial_keyframe: int = param(
+        -1, description="Keyframe where the repeat starts (-1: search the whole map for the first localization).",
+        min=-1,
+    )
+    workers: int = param(
+        1, description="Threads of the stereo front end (one image source per thread; 1: sequential).", min=1,
+        max=8,
+    )
