@@ -32,16 +32,14 @@ from __future__ import annotations
 import sys
 from typing import Any
 
-from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, TransformStamped
-from rclpy.node import Node
 from rclpy.timer import Timer
 
 from lightfast.config import ConfigError
 from lightfast.ros.convert import matrix_to_pose_stamped
-from lightfast.ros.diagnostics import Level, ProblemLog, diagnostic_array, diagnostic_status, log_at
+from lightfast.ros.diagnostics import Level
 from lightfast.ros.errors import ConversionError
-from lightfast.ros.params import ConfigParameters
+from lightfast.ros.node import LightfastNode
 from lightfast.ros.qos import OUTPUT_QOS
 from lightfast.ros.racr_msgs import transform_stamped_to_matrix
 from lightfast.ros.runtime import run_node
@@ -61,10 +59,9 @@ from lightfast.topics import (
 NODE_NAME = "racr_platform_sim_node"
 
 
-class RacrPlatformSimNode(Node):
+class RacrPlatformSimNode(LightfastNode[RacrPlatformSimConfig]):
     def __init__(self, **kwargs: Any) -> None:
-        super().__init__(NODE_NAME, **kwargs)
-        self.params = ConfigParameters(self, RacrPlatformSimConfig)
+        super().__init__(NODE_NAME, RacrPlatformSimConfig, status_topic=PLATFORM_STATUS_TOPIC, **kwargs)
         cfg = self.params.config
         if not cfg.scene_path:
             raise ConfigError("parameter scene_path is required (a scene directory of `lightfast sim racr`)")
@@ -72,29 +69,25 @@ class RacrPlatformSimNode(Node):
         self.scene_name = scene.spec.name
         self.platform = TimedPlatform(scene.make_platform(cfg.platform_config(), seed=cfg.seed),
                                       time_scale=cfg.time_scale)
-        self.problems = ProblemLog(lambda level, text: log_at(self.get_logger(), level, text))
         self.last_error = ""
         self.commands = 0
         self.bad_commands = 0  # not even a rigid transform in platform_hand
-        self._truth_stamp_ns = self._now_ns()
+        self._truth_stamp_ns = self.now_ns()
         self._stop_timer: Timer | None = None
         self.pose_pub = self.create_publisher(PoseStamped, PLATFORM_POSE_TOPIC, OUTPUT_QOS)
         self.stopped_pub = self.create_publisher(PoseStamped, PLATFORM_STOPPED_TOPIC, OUTPUT_QOS)
-        self.status_pub = self.create_publisher(DiagnosticArray, PLATFORM_STATUS_TOPIC, OUTPUT_QOS)
         self.truth_pub = self.create_publisher(PoseStamped, SIM_CAMERA_POSE_TOPIC, OUTPUT_QOS)
         self.create_subscription(TransformStamped, RACR_HAND_MOTION_TOPIC, self._on_command, OUTPUT_QOS)
         self.state_timer = self.create_timer(1.0 / cfg.state_rate_hz, self._publish_state)
         self.get_logger().info(f"platform of scene {self.scene_name} ready (time_scale {cfg.time_scale:g}); "
                                f"executing {RACR_HAND_MOTION_TOPIC}")
         self._publish_state()
-
-    def _now_ns(self) -> int:
-        return self.get_clock().now().nanoseconds
+        self.announce_ready()
 
     # ------------------------------------------------------------------------------------------------ input
     def _on_command(self, msg: TransformStamped) -> None:
         self.commands += 1
-        now_ns = self._now_ns()
+        now_ns = self.now_ns()
         try:
             M, _, frame_id, _ = transform_stamped_to_matrix(msg)
             if frame_id != PLATFORM_HAND_FRAME:
@@ -110,7 +103,7 @@ class RacrPlatformSimNode(Node):
             return
         wait_s = max(start.stop_due - now_ns * 1e-9, 0.0)
         self._stop_timer = self.create_timer(max(wait_s, 1e-4), self._on_stop_due)
-        self._publish_status(Level.OK, f"executing a motion of {start.duration_s:.2f} simulated s")
+        self.publish_status(Level.OK, f"executing a motion of {start.duration_s:.2f} simulated s")
 
     def _refuse(self, text: str, now_ns: int) -> None:
         self.last_error = text
@@ -118,17 +111,17 @@ class RacrPlatformSimNode(Node):
         if not self.platform.moving:  # at rest: report the stop that ends this command
             self.platform.poll(now_ns * 1e-9)
             self._stopped(now_ns)
-        self._publish_status(Level.WARN, text)
+        self.publish_status(Level.WARN, text)
 
     def _on_stop_due(self) -> None:
         timer, self._stop_timer = self._stop_timer, None
         if timer is not None:
             timer.cancel()
             self.destroy_timer(timer)
-        now_ns = self._now_ns()
+        now_ns = self.now_ns()
         if self.platform.poll(now_ns * 1e-9):
             self._stopped(now_ns)
-            self._publish_status(Level.OK, "at rest")
+            self.publish_status(Level.OK, "at rest")
         elif self.platform.moving:  # the timer fired a little early
             self._stop_timer = self.create_timer(1e-3, self._on_stop_due)
 
@@ -145,19 +138,17 @@ class RacrPlatformSimNode(Node):
                                                       frame_id=SIM_WORLD_FRAME))
 
     def _publish_state(self) -> None:
-        now_ns = self._now_ns()
+        now_ns = self.now_ns()
         self.pose_pub.publish(matrix_to_pose_stamped(self.platform.reported_hand_pose, stamp_ns=now_ns,
                                                      frame_id=PLATFORM_BASE_FRAME))
         self._publish_truth()
-        self._publish_status(Level.OK, "moving" if self.platform.moving else "at rest")
+        self.publish_status(Level.OK, "moving" if self.platform.moving else "at rest")
 
-    def _publish_status(self, level: Level, message: str) -> None:
+    def status_values(self) -> dict[str, Any]:
         p = self.platform
-        values = {"scene": self.scene_name, "moving": p.moving, "commands": self.commands, "executed": p.executed,
-                  "refused": p.refused, "bad_commands": self.bad_commands, "simulated_time_s": p.simulated_time_s,
-                  "time_scale": p.time_scale, "last_error": self.last_error}
-        self.status_pub.publish(diagnostic_array(self._now_ns(), [diagnostic_status(NODE_NAME, level, message,
-                                                                                   values)]))
+        return {"scene": self.scene_name, "moving": p.moving, "commands": self.commands, "executed": p.executed,
+                "refused": p.refused, "bad_commands": self.bad_commands, "simulated_time_s": p.simulated_time_s,
+                "time_scale": p.time_scale, "last_error": self.last_error}
 
 
 def main(args: list[str] | None = None) -> int:

@@ -27,9 +27,7 @@ from __future__ import annotations
 import sys
 from typing import Any
 
-from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, TransformStamped
-from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 
@@ -42,9 +40,9 @@ from lightfast.ros.convert import (
     pose_stamped_to_matrix,
     xyz_to_pointcloud2,
 )
-from lightfast.ros.diagnostics import Level, ProblemLog, diagnostic_array, diagnostic_status, log_at
+from lightfast.ros.diagnostics import Level
 from lightfast.ros.errors import ConversionError
-from lightfast.ros.params import ConfigParameters
+from lightfast.ros.node import LightfastNode
 from lightfast.ros.qos import OUTPUT_QOS
 from lightfast.ros.racr_msgs import matrix_to_transform_stamped
 from lightfast.ros.runtime import run_node
@@ -68,10 +66,9 @@ NODE_NAME = "racr_vse_node"
 KEYFRAME_QOS = QoSProfile(depth=32, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
 
 
-class RacrVseNode(Node):
+class RacrVseNode(LightfastNode[RacrVseSimConfig]):
     def __init__(self, **kwargs: Any) -> None:
-        super().__init__(NODE_NAME, **kwargs)
-        self.params = ConfigParameters(self, RacrVseSimConfig)
+        super().__init__(NODE_NAME, RacrVseSimConfig, status_topic=VSE_STATUS_TOPIC, **kwargs)
         cfg = self.params.config
         if not cfg.scene_path:
             raise ConfigError("parameter scene_path is required (a scene directory of `lightfast sim racr`)")
@@ -79,7 +76,6 @@ class RacrVseNode(Node):
         self.scene_name = scene.spec.name
         self.vse = scene.make_vse(cfg.lighting, config=cfg.vse_config(), seed=cfg.seed,
                                   scale_m_per_vse=cfg.scale_m_per_vse or None)
-        self.problems = ProblemLog(lambda level, text: log_at(self.get_logger(), level, text))
         self.observations = 0
         self._keyframe_id = 0
         self._last_truth_stamp: int | None = None
@@ -89,10 +85,10 @@ class RacrVseNode(Node):
         self.kf_pose_pub = self.create_publisher(TransformStamped, VSE_KEYFRAME_POSE_TOPIC, KEYFRAME_QOS)
         self.pose_pub = self.create_publisher(PoseStamped, VSE_POSE_TOPIC, OUTPUT_QOS)
         self.points_pub = self.create_publisher(PointCloud2, VSE_POINTS_TOPIC, OUTPUT_QOS)
-        self.status_pub = self.create_publisher(DiagnosticArray, VSE_STATUS_TOPIC, OUTPUT_QOS)
         self.create_subscription(PoseStamped, SIM_CAMERA_POSE_TOPIC, self._on_truth, OUTPUT_QOS)
         self.create_timer(cfg.republish_s, self._republish)
         self.get_logger().info(f"VSE stand-in for scene {self.scene_name} under the {cfg.lighting!r} lighting")
+        self.announce_ready()
 
     def _on_truth(self, msg: PoseStamped) -> None:
         try:
@@ -103,7 +99,7 @@ class RacrVseNode(Node):
         if stamp_ns == self._last_truth_stamp:
             return  # a repeat of the pose already observed
         self._last_truth_stamp = stamp_ns
-        obs_stamp = max(self.get_clock().now().nanoseconds, stamp_ns + 1)  # captured after the stop
+        obs_stamp = max(self.now_ns(), stamp_ns + 1)  # captured after the stop
         try:
             obs = self.vse.observe(T_world_cam, stamp_s=obs_stamp * 1e-9)
         except (LightfastError, ValueError) as exc:
@@ -115,8 +111,8 @@ class RacrVseNode(Node):
             pub.publish(msg_out)
         values = {"scene": self.scene_name, "observations": self.observations, "points": len(obs.points_vse),
                   "keyframes": len(obs.keyframes), "stamp_ns": obs_stamp}
-        self.status_pub.publish(diagnostic_array(obs_stamp, [diagnostic_status(
-            NODE_NAME, Level.OK, f"observation {self.observations}: {len(obs.points_vse)} points", values)]))
+        self.publish_status(Level.OK, f"observation {self.observations}: {len(obs.points_vse)} points", values,
+                            stamp_ns=obs_stamp)
 
     def _messages(self, obs: VseObservation, stamp_ns: int) -> list[tuple[Any, Any]]:
         """The messages of one observation in publishing order (camera_info, keyframes, pose, cloud last)."""
