@@ -31,8 +31,9 @@ def _cmd_eval_daylight(args: argparse.Namespace) -> int:
 
 def _cmd_eval_racr(args: argparse.Namespace) -> int:
     """Bad arguments the evaluation finds (an unknown method, lighting or scene) exit 2, as argparse errors do."""
-    from lightfast.eval.errors import RacrEvalError
+    from lightfast.config import load_config_yaml
     from lightfast.eval.racr import RacrEvalConfig, evaluate_racr, run_convergence_study
+    from lightfast.racr.node_config import RacrNodeConfig
 
     if args.convergence_condition:
         try:
@@ -47,10 +48,12 @@ def _cmd_eval_racr(args: argparse.Namespace) -> int:
     try:
         scenes = [s for x in (args.scenes or []) for s in _csv_list(x)] or None
         config = RacrEvalConfig(job_cost=args.job_cost, eta=args.eta, handeye_error_deg=args.handeye_error_deg)
+        node = load_config_yaml(RacrNodeConfig, args.params_file, node_name="racr_node") if args.params_file else None
         runs = evaluate_racr(args.scenes_dir, args.out, methods=_csv_list(args.methods), scenes=scenes,
-                             lightings=_csv_list(args.lighting), repeats=args.repeats, config=config, jobs=args.jobs,
-                             progress=not args.no_progress and sys.stderr.isatty(), max_runs=args.max_runs)
-    except (RacrEvalError, ValueError) as exc:
+                             lightings=_csv_list(args.lighting), repeats=args.repeats, config=config, node=node,
+                             jobs=args.jobs, progress=not args.no_progress and sys.stderr.isatty(),
+                             max_runs=args.max_runs)
+    except (LightfastError, ValueError) as exc:
         print(f"lightfast eval racr: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
     table = args.out / "racr_table.md"
@@ -137,7 +140,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--max-runs", type=int, default=None, help="do at most this many missing runs, then stop")
     p.add_argument("--job-cost", choices=("paper", "measured"), default="paper",
                    help="simulated alignment durations: the paper's (fast 0.2 s, fine 5 s) or measured CPU time")
-    p.add_argument("--eta", type=float, default=RacrEvalConfig().eta, help="stop threshold of g (see module notes)")
+    p.add_argument("--params-file", type=Path, default=None, metavar="YAML",
+                   help="racr_node parameter file the rACR methods start from (default: the node's defaults, as in "
+                   "config/racr_node.yaml); each method then changes only what it ablates")
+    p.add_argument("--eta", type=float, default=RacrEvalConfig().eta,
+                   help="stop threshold of g, replaces adjustment.eta (the simulated sensors cannot resolve 1e-4)")
     p.add_argument("--handeye-error-deg", type=float, default=0.0,
                    help="inject this rotation error into the estimated hand-eye X (section 3.7 study)")
     p.add_argument("--convergence-condition", metavar="SCENE", default=None,

@@ -84,12 +84,14 @@ class RacrNodeConfig(SensorInputOptions):
         min=-1,
     )
 
-    def start_session(self, reference: ReferenceObservation, clock: Callable[[], float]) -> RacrSession:
+    def start_session(self, reference: ReferenceObservation, clock: Callable[[], float], *, threaded: bool = True,
+                      session_class: type[RacrSession] = RacrSession) -> RacrSession:
         """The session of a run against ``reference`` with this configuration (what ``racr_node`` and the
-        evaluation run); ``clock`` gives the time in seconds."""
-        return RacrSession(reference.points_m, reference.T_ref_camref, config=self.session, scheme_config=self.scheme,
-                           fast_config=self.fast, fine_config=self.fine, adjustment_config=self.adjustment,
-                           init_config=self.initialization, clock=clock)
+        evaluation run); ``clock`` gives the time in seconds; ``threaded``: see :class:`RacrSession`."""
+        return session_class(reference.points_m, reference.T_ref_camref, config=self.session,
+                             scheme_config=self.scheme, fast_config=self.fast, fine_config=self.fine,
+                             adjustment_config=self.adjustment, init_config=self.initialization, clock=clock,
+                             threaded=threaded)
 
 
 @dataclass

@@ -207,8 +207,12 @@ class RacrSession:
         adjustment_config: AdjustmentConfig | None = None,
         init_config: InitializationConfig | None = None,
         clock: Callable[[], float] = time.monotonic,
+        threaded: bool = True,
     ) -> None:
         self.config = config or SessionConfig()
+        #: the scheme aligns in its own thread; False: the caller runs its jobs (``scheme.next_alignment_job``,
+        #: ``job.run()``, ``scheme.commit``), e.g. an evaluation in simulated time
+        self.threaded = threaded
         self.scheme_config = scheme_config or SchemeConfig()
         self.fast_config = fast_config or FastAlignmentConfig()
         self.fine_config = fine_config or FineAlignmentConfig()
@@ -378,13 +382,15 @@ class RacrSession:
             self._init_error = f"{type(exc).__name__}: {exc}"
             logger.warning("rACR initialization failed: %s", exc)
             return
+        result = self._hand_eye_result(result)
         self._hand_eye = result
         logger.info("rACR initialization: s=%.6g m per VSE unit, residuals %.3g deg / %.3g m",
                     result.scale_m_per_vse, result.rotation_residual_deg, result.translation_residual_m)
         scheme = RacrScheme(self._reference, self._T_ref_camref, result.T_cam_hand, config=self.scheme_config,
                             fast_config=self.fast_config, fine_config=self.fine_config,
                             adjustment_config=self.adjustment_config, clock=self._clock)
-        scheme.start()
+        if self.threaded:
+            scheme.start()
         self._scheme = scheme
         obs = self._observation
         if obs is not None and self._last_stop is not None and obs.stamp <= self._last_stop:
@@ -394,6 +400,11 @@ class RacrSession:
             self._hand_to_scheme(scheme, scaled)
         if self._vse_pose is not None and (obs is None or self._vse_pose[1] > obs.stamp):
             scheme.add_vse_pose(_scaled_pose(self._vse_pose[0], result.scale_m_per_vse), stamp=self._vse_pose[1])
+
+    def _hand_eye_result(self, result: HandEyeResult) -> HandEyeResult:
+        """The initialization's result as the scheme gets it: unchanged here; a study of the method's sensitivity
+        (§3.7: an error injected into X) overrides this."""
+        return result
 
     @property
     def _scale(self) -> float | None:

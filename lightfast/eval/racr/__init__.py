@@ -6,10 +6,11 @@ motions, VSE frames and alignment jobs are charged simulated durations in s; the
 the evaluation takes) and is scored against the simulator's truth by the AFD (px; success below 3 px). The full
 protocol and its design notes are in docs/racr_evaluation.md.
 
-- :mod:`~lightfast.eval.racr.protocol`: the methods, lightings, :class:`RacrEvalConfig` and the protocol hash;
-- :mod:`~lightfast.eval.racr.run`: one run — start pose, initialization (§3.2), VSE scaling (§3.3), the alignment
-  loop of the scheme (§3.5–3.6) or ACR, the score (:func:`run_one`);
-- :mod:`~lightfast.eval.racr.records`: the run record and the per-run cache in ``OUT/runs/<protocol hash>/``;
+- :mod:`~lightfast.eval.racr.protocol`: the methods (configurations of the node's session), lightings,
+  :class:`RacrEvalConfig` and what keys a run;
+- :mod:`~lightfast.eval.racr.run`: one run — start pose, the node's session (initialization §3.2, scaling §3.3,
+  scheme §3.5–3.6) in simulated time or ACR, the score (:func:`run_one`);
+- :mod:`~lightfast.eval.racr.records`: the run record and the per-run cache in ``OUT/runs/``, keyed by content;
 - :mod:`~lightfast.eval.racr.evaluate`: every missing run, resumable (:func:`evaluate_racr`);
 - :mod:`~lightfast.eval.racr.aggregate` and :mod:`~lightfast.eval.racr.report`: statistics, tables, CSV, JSON,
   plots;
@@ -31,9 +32,9 @@ from lightfast.eval.racr.protocol import (
     METHODS,
     PROTOCOL_VERSION,
     RacrEvalConfig,
-    protocol_hash,
+    method_config,
 )
-from lightfast.eval.racr.records import RunRecord, TracePoint, load_records, run_key
+from lightfast.eval.racr.records import RunRecord, TracePoint, load_records
 from lightfast.eval.racr.report import speed_markdown, table_markdown, write_outputs
 from lightfast.eval.racr.run import initial_offset, run_one
 
@@ -56,10 +57,9 @@ __all__ = [
     "evaluate_racr",
     "initial_offset",
     "load_records",
+    "method_config",
     "paired",
-    "protocol_hash",
     "run_convergence_study",
-    "run_key",
     "run_one",
     "speed_markdown",
     "summarize",

@@ -5,9 +5,10 @@ scene-major through :func:`~lightfast.eval.racr.run.run_one`, in-process or in `
 process holding one loaded scene at a time (:func:`cached_scene`). Every finished run is cached as a record
 (:mod:`lightfast.eval.racr.records`) and the outputs (:func:`~lightfast.eval.racr.report.write_outputs`) are
 rewritten after it: an interrupted evaluation leaves valid partial results, and one started again skips the runs
-this protocol has already recorded.
+recorded with the same key (scene content, method configuration, protocol, code version).
 
-Outputs in ``OUT``: ``runs/<protocol hash>/*.json`` and the report's tables, CSV, JSON and plots.
+Outputs in ``OUT``: ``runs/*.json`` and the report's tables, CSV, JSON and plots, from the records of this call's
+runs only.
 """
 from __future__ import annotations
 
@@ -17,13 +18,16 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
+from lightfast.config import config_from_mapping
+from lightfast.eval.cache import content_digest, run_key
 from lightfast.eval.errors import RacrEvalError
-from lightfast.eval.racr.protocol import LIGHTINGS, METHODS, RacrEvalConfig, protocol_hash
-from lightfast.eval.racr.records import RunRecord, load_records, run_key
+from lightfast.eval.racr.protocol import LIGHTINGS, METHODS, RacrEvalConfig, protocol_parts
+from lightfast.eval.racr.records import RunRecord, load_records, record_path
 from lightfast.eval.racr.report import write_outputs
 from lightfast.eval.racr.run import run_one
 from lightfast.io import write_text_atomic
 from lightfast.progress import track
+from lightfast.racr.node_config import RacrNodeConfig
 
 log = logging.getLogger(__name__)
 
@@ -42,18 +46,23 @@ def cached_scene(path: Path) -> Any:
     return _SCENES[key]
 
 
-def _job(job: tuple[str, str, str, int, dict[str, Any]]) -> RunRecord:
-    path, lighting, method, repeat, cfg = job
-    return run_one(cached_scene(Path(path)), lighting, method, repeat, RacrEvalConfig(**cfg))
+def _job(job: tuple[str, str, str, int, dict[str, Any], dict[str, Any], str]) -> RunRecord:
+    path, lighting, method, repeat, cfg, node, key = job
+    return run_one(cached_scene(Path(path)), lighting, method, repeat, config_from_mapping(RacrEvalConfig, cfg),
+                   config_from_mapping(RacrNodeConfig, node), key)
 
 
 def evaluate_racr(scenes_dir: Path, out_dir: Path, *, methods: Sequence[str] = tuple(METHODS),
                   scenes: Sequence[str] | None = None, lightings: Sequence[str] = ("varied",), repeats: int = 1,
-                  config: RacrEvalConfig | None = None, jobs: int = 1, progress: bool = True,
-                  max_runs: int | None = None, on_run: Callable[[RunRecord], None] | None = None) -> list[RunRecord]:
+                  config: RacrEvalConfig | None = None, node: RacrNodeConfig | None = None, jobs: int = 1,
+                  progress: bool = True, max_runs: int | None = None,
+                  on_run: Callable[[RunRecord], None] | None = None) -> list[RunRecord]:
     """Run every missing (scene, lighting, method, repeat) — at most ``max_runs`` of them — and (re)write the
-    outputs from all records of this protocol in ``out_dir``. Returns those records."""
+    outputs from the records in ``out_dir`` of these scenes' content and this protocol (any method and lighting).
+    ``node``: the rACR node's configuration the methods start from (default: its defaults). Returns those
+    records."""
     config = config or RacrEvalConfig()
+    node = node or RacrNodeConfig()
     for m in methods:
         if m not in METHODS:
             raise RacrEvalError(f"unknown method {m!r}; choose from {', '.join(METHODS)}")
@@ -72,19 +81,26 @@ def evaluate_racr(scenes_dir: Path, out_dir: Path, *, methods: Sequence[str] = t
     if not dirs:
         raise RacrEvalError(f"no scenes in {scenes_dir} (make them with `lightfast sim racr {scenes_dir}`)")
     out_dir.mkdir(parents=True, exist_ok=True)
-    proto = protocol_hash(config)
-    done = {r.key for r in load_records(out_dir, proto)}
+    shared = protocol_parts(config, node)
+    keys = {}  # (scene dir, lighting, method, repeat) -> key, for every method and lighting: the report shows all
+    for d in dirs:
+        scene = content_digest(d, skip=("preview",))
+        for r in range(repeats):
+            for lt in LIGHTINGS:
+                for m in METHODS:
+                    keys[(str(d), lt, m, r)] = run_key({**shared, "scene": scene, "lighting": lt, "method": m,
+                                                        "repeat": r})
+    done = {rec.key for rec in load_records(out_dir, set(keys.values()))}
     # scene-major order: one scene's mesh stays loaded for all its runs
-    todo = [(str(d), lt, m, r, config.to_dict()) for d in dirs for r in range(repeats) for lt in lightings
-            for m in methods if run_key(d.name, lt, m, r) not in done]
+    todo = [(d, lt, m, r, config.to_dict(), node.to_dict(), k) for (d, lt, m, r), k in keys.items()
+            if lt in lightings and m in methods and k not in done]
     if max_runs is not None:
         todo = todo[:max_runs]
     log.info("%d runs to do (%d already done)", len(todo), len(done))
 
     def finish(rec: RunRecord) -> None:
-        write_text_atomic(out_dir / "runs" / rec.protocol / f"{rec.key}.json",
-                          json.dumps(rec.to_dict(), indent=1) + "\n")
-        write_outputs(out_dir, config)  # partial results survive an interruption
+        write_text_atomic(record_path(out_dir, rec), json.dumps(rec.to_dict(), indent=1) + "\n")
+        write_outputs(out_dir, load_records(out_dir, set(keys.values())), config, node)  # survives an interruption
         log.info("%s: AFD %.2f px (%s), %d adjustments, %.1f s simulated, %.0f s wall, %s", rec.key, rec.afd_px,
                  "ok" if rec.success else "FAIL", rec.adjustments, rec.time_loop_s, rec.wall_s, rec.stop_reason)
         if on_run is not None:
@@ -101,5 +117,6 @@ def evaluate_racr(scenes_dir: Path, out_dir: Path, *, methods: Sequence[str] = t
             for rec in track(pool.map(_job, todo), desc="rACR evaluation", total=len(todo), enabled=progress,
                              unit="run"):
                 finish(rec)
-    write_outputs(out_dir, config)
-    return load_records(out_dir, proto)
+    runs = load_records(out_dir, set(keys.values()))
+    write_outputs(out_dir, runs, config, node)
+    return runs

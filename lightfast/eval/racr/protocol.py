@@ -1,52 +1,46 @@
-"""The protocol of ``lightfast eval racr`` (paper §5): the compared methods, the simulation's parameters and the hash
-that names a protocol's records.
+"""The protocol of ``lightfast eval racr`` (paper §5): the compared methods, the simulation's parameters and what
+decides a run's key.
 
-Methods: ``racr`` (parallel scheme, §3.6), ``racr-serial``, the ablations of §5.4 — ``racr-p`` without Eq. 16
-(``FineAlignmentConfig.refine_keyframes=False``), ``racr-f`` without the fine alignment
-(``SchemeConfig.fine_alignment=False``), ``racr-s`` with σ_p fixed at 1 (``estimate_scale`` off in both alignments:
-the real scale ŝ of the initialization is all it has) — and ``acr``, the ACR baseline. Relocalization lightings:
-``similar`` and ``varied`` (:mod:`lightfast.sim.racr`). Success: AFD < ``AFD_SUCCESS_PX`` = 3 px.
+Every rACR method is the node's own session (:class:`~lightfast.racr.session.RacrSession`, built by
+:meth:`~lightfast.racr.node_config.RacrNodeConfig.start_session`) with the node's configuration — its defaults, or a
+``racr_node`` parameter file — changed only as a method says (:data:`METHODS`: ``racr-serial`` sets
+``scheme.mode: serial``; the §5.4 ablations ``racr-p`` without Eq. 16, ``racr-f`` without the fine alignment,
+``racr-s`` with σ_p fixed at 1) and with ``adjustment.eta`` set to :attr:`RacrEvalConfig.eta`. ``acr`` is the ACR
+baseline. Relocalization lightings: ``similar`` and ``varied`` (:mod:`lightfast.sim.racr`). Success: AFD <
+``AFD_SUCCESS_PX`` = 3 px.
 
 :class:`RacrEvalConfig` (seconds of simulated time, metres, degrees): the durations charged — alignment jobs at the
-paper's durations (fast 0.2 s = 5 Hz, fine 5 s, §3.6) or their measured CPU time, one ACR estimate 4.8 s (Table 3),
-one VSE frame 1/15 s (DSO's 15 FPS) —, the stop rule (η, adjustment and time limits), the initialization excursions
-(§3.2) and the hand–eye error injected for the §3.7 study.
-
-VSE keyframes: the scene's VSE stand-in spreads its keyframes 3 cm around the camera; the evaluation uses
-``vse_keyframe_baseline_m`` = 8 cm, the spread of the map a DSO builds during the initialization excursions and the
-first adjustment. With 3 cm the photometric term of the fine alignment is nearly blind (a 1 mm depth change moves a
-point by f·b·Δz/z² ≈ 0.016 px between keyframes at 1 m); docs/racr_evaluation.md has the measured effect.
-
-η: the paper's η = 1e-4 is below what this simulator can resolve (the VSE stand-in's independent pose jitter of
-0.02° and 0.2 mm per pose, the platform's repeatability floor of 0.005° and 0.05 mm per axis and motion), so with it
-no run would ever stop by itself. ``eta`` (default 2e-3, ≈ 0.08° / 1.4 mm of motion left) is the stop threshold
-used; it changes when a run stops, never how it is scored.
-
-:func:`protocol_hash` names the records' directory ``OUT/runs/<hash>/``.
+paper's durations (fast 0.2 s, fine 5 s, §3.6) or their measured CPU time, one ACR estimate 4.8 s (Table 3), one VSE
+frame 1/15 s —, the stop rule (η, adjustment and time limits) and the hand–eye error injected for the §3.7 study.
+VSE keyframes are spread ``vse_keyframe_baseline_m`` = 8 cm, the spread of the map a DSO builds during the
+initialization motions (docs/racr_evaluation.md). η: the paper's 1e-4 is below what the simulated sensors resolve
+(VSE pose jitter 0.02° / 0.2 mm, platform repeatability 0.005° / 0.05 mm), so no run would stop by itself; ``eta``
+(default 2e-3) changes when a run stops, never how it is scored.
 """
 from __future__ import annotations
 
-import hashlib
-import json
 from dataclasses import dataclass
+from typing import Any
 
-from lightfast.config import Config, param
-from lightfast.racr import FastAlignmentConfig, FineAlignmentConfig, SchemeConfig
+from lightfast.config import Config, param, replace_config
+from lightfast.eval.cache import code_version
+from lightfast.eval.errors import RacrEvalError
+from lightfast.racr.node_config import RacrNodeConfig
 
-#: method → (scheme mode, fine alignment, Eq. 16 keyframe refinement, scale estimation); ``acr`` is the baseline
-METHODS: dict[str, tuple[str, bool, bool, bool] | None] = {
-    "racr": ("parallel", True, True, True),
-    "racr-serial": ("serial", True, True, True),
-    "racr-p": ("parallel", True, False, True),
-    "racr-f": ("parallel", False, True, True),
-    "racr-s": ("parallel", True, True, False),
+#: method → changes of the node's configuration (dotted parameter names); ``acr`` is the baseline
+METHODS: dict[str, dict[str, Any] | None] = {
+    "racr": {},
+    "racr-serial": {"scheme.mode": "serial"},
+    "racr-p": {"fine.refine_keyframes": False},
+    "racr-f": {"scheme.fine_alignment": False},
+    "racr-s": {"fast.estimate_scale": False, "fine.estimate_scale": False},
     "acr": None,
 }
 LABELS = {"racr": "rACR", "racr-serial": "rACR (serial)", "racr-p": "rACR-P", "racr-f": "rACR-F",
           "racr-s": "rACR-S", "acr": "ACR"}
 LIGHTINGS = ("similar", "varied")
 ABLATION = ("racr", "racr-p", "racr-f", "racr-s")
-PROTOCOL_VERSION = 2
+PROTOCOL_VERSION = 3
 AFD_SUCCESS_PX = 3.0
 
 
@@ -70,22 +64,26 @@ class RacrEvalConfig(Config):
                        "below the simulated sensors' noise).", min=0.0)
     max_adjustments: int = param(20, description="Most platform motions of one run.", min=1)
     max_time_s: float = param(600.0, description="Most simulated loop time of one run, s.", min=1.0)
-    init_motions: int = param(3, description="Initialization excursions (out and back), about hand x, y, z.",
-                              min=2, max=6)
-    init_rotation_deg: float = param(10.0, description="Rotation of an initialization excursion, deg.", min=1.0)
-    init_translation_m: float = param(0.02, description="Translation along the rotation axis of an excursion, m.",
-                                      min=0.0)
-    init_method: str = param("park", description="Hand-eye solver of the initialization (OpenCV's Tsai needs "
-                             "rotations above ~17 deg).", choices=("tsai", "park", "horaud", "andreff"))
     acr_max_iterations: int = param(30, description="Most ACR iterations.", min=1)
     handeye_error_deg: float = param(0.0, description="Extra rotation error injected into the estimated hand-eye "
                                      "X (the section 3.7 study), deg.", min=0.0, max=180.0)
 
 
-def protocol_hash(config: RacrEvalConfig) -> str:
-    """The records' directory name: the protocol and the method's own default configuration (a changed default —
-    a new option of the alignments — gets new records instead of mixing with runs of the old method)."""
-    method = {c.__name__: c().to_dict() for c in (SchemeConfig, FastAlignmentConfig, FineAlignmentConfig)}
-    doc = {"version": PROTOCOL_VERSION, "config": config.to_dict(), "method": method}
-    return hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()[:12]
+def method_config(method: str, node: RacrNodeConfig, config: RacrEvalConfig) -> RacrNodeConfig:
+    """The node configuration a method runs: ``node`` with the method's changes and the protocol's η."""
+    changes = METHODS[method]
+    if changes is None:
+        raise RacrEvalError(f"{method} is not a configuration of the rACR session")
+    return replace_config(node, {**changes, "adjustment.eta": config.eta})
 
+
+#: The code a run executes (its version is part of the run's key).
+CODE = ("racr", "eval/racr", "sim/racr", "sim/racr_platform.py", "sim/sky_model.py", "geometry", "camera.py",
+        "raycast.py", "config.py")
+
+
+def protocol_parts(config: RacrEvalConfig, node: RacrNodeConfig) -> dict[str, Any]:
+    """What every run of an evaluation shares: the protocol version, its configuration, the node configuration
+    and the code version."""
+    return {"version": PROTOCOL_VERSION, "config": config.to_dict(), "node": node.to_dict(),
+            "code": code_version(*CODE)}

@@ -6,9 +6,11 @@ initialization time (s), the wall time (s), one :class:`TracePoint` per motion (
 camera's true position error in mm and rotation error in deg against the reference pose, rACR's gap g) and the
 method's details (scale and hand–eye errors, alignment counts).
 
-Cache: each record is a JSON file ``OUT/runs/<protocol hash>/<scene>_<lighting>_<method>_r<repeat>.json``
-(:func:`run_key`); :func:`load_records` reads them back, so an evaluation resumes without repeating a run and
-another protocol gets its own records.
+Cache: each record is a JSON file ``OUT/runs/<scene>_<lighting>_<method>_r<repeat>.<key>.json`` whose key
+(:func:`lightfast.eval.cache.run_key`) hashes what decides the run: the scene's content, the method's
+configuration, the protocol and the code version (:func:`~lightfast.eval.racr.protocol.protocol_parts`);
+:func:`load_records` reads them back, and an evaluation reuses a record only for its exact key. ``reported`` is the
+method's own verdict (``converged``, ``failed``, ``ambiguous``, …), to compare with the truth's.
 """
 from __future__ import annotations
 
@@ -46,7 +48,7 @@ class RunRecord:
     lighting: str
     method: str
     repeat: int
-    protocol: str
+    key: str
     afd_px: float
     success: bool
     afd_initial_px: float
@@ -58,6 +60,7 @@ class RunRecord:
     wall_s: float
     trace: list[TracePoint] = field(default_factory=list)
     details: dict[str, Any] = field(default_factory=dict)
+    reported: str = ""
 
     @property
     def time_total_s(self) -> float:
@@ -69,8 +72,13 @@ class RunRecord:
         return next((p.time_s for p in self.trace if p.afd_px < AFD_SUCCESS_PX), math.inf)
 
     @property
-    def key(self) -> str:
-        return run_key(self.scene, self.lighting, self.method, self.repeat)
+    def name(self) -> str:
+        return f"{self.scene}_{self.lighting}_{self.method}_r{self.repeat}"
+
+    @property
+    def self_reported_failure(self) -> bool:
+        """The method said it did not relocalize (anything but ``converged``)."""
+        return self.reported != "converged"
 
     def to_dict(self) -> dict[str, Any]:
         d = asdict(self)
@@ -87,14 +95,16 @@ class RunRecord:
         return cls(**d)
 
 
-def run_key(scene: str, lighting: str, method: str, repeat: int) -> str:
-    return f"{scene}_{lighting}_{method}_r{repeat}"
+def record_path(out_dir: Path, record: RunRecord) -> Path:
+    return out_dir / "runs" / f"{record.name}.{record.key}.json"
 
 
-def load_records(out_dir: Path, protocol: str | None = None) -> list[RunRecord]:
-    """The run records in ``out_dir/runs/<protocol>/`` (every protocol's if None)."""
+def load_records(out_dir: Path, keys: set[str] | None = None) -> list[RunRecord]:
+    """The run records in ``out_dir/runs/`` (those with one of ``keys`` if given)."""
     runs = []
-    for p in sorted((out_dir / "runs").glob(f"{protocol or '*'}/*.json")):
+    for p in sorted((out_dir / "runs").glob("*.json")):
+        if keys is not None and p.name.rsplit(".", 2)[-2] not in keys:
+            continue
         try:
             runs.append(RunRecord.from_dict(json.loads(p.read_text())))
         except (OSError, ValueError, TypeError) as exc:

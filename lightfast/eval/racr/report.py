@@ -1,4 +1,4 @@
-"""The outputs of the rACR evaluation (paper §5) from the records of one protocol: :func:`write_outputs`.
+"""The outputs of the rACR evaluation (paper §5) from the records of one evaluation: :func:`write_outputs`.
 
 All written atomically into ``OUT``:
 
@@ -30,10 +30,10 @@ from lightfast.eval.racr.protocol import (
     LIGHTINGS,
     METHODS,
     RacrEvalConfig,
-    protocol_hash,
 )
-from lightfast.eval.racr.records import RunRecord, load_records
+from lightfast.eval.racr.records import RunRecord
 from lightfast.io import write_text_atomic
+from lightfast.racr.node_config import RacrNodeConfig
 
 
 def fmt(x: float, nd: int = 2) -> str:
@@ -180,17 +180,15 @@ def _plots(out_dir: Path, runs: Sequence[RunRecord]) -> None:
         plt.close(fig)
 
 
-def write_outputs(out_dir: Path, config: RacrEvalConfig) -> None:
-    """(Re)write the table, CSV, JSON and plots from the records of this protocol in ``out_dir``."""
-    proto = protocol_hash(config)
-    runs = sorted(load_records(out_dir, proto),
-                  key=lambda r: (r.scene, r.lighting, list(METHODS).index(r.method), r.repeat))
+def write_outputs(out_dir: Path, records: Sequence[RunRecord], config: RacrEvalConfig, node: RacrNodeConfig) -> None:
+    """(Re)write the table, CSV, JSON and plots of ``records`` into ``out_dir``."""
+    runs = sorted(records, key=lambda r: (r.scene, r.lighting, list(METHODS).index(r.method), r.repeat))
     if not runs:
         return
     write_text_atomic(out_dir / "racr_table.md", table_markdown(runs))
     write_text_atomic(out_dir / "racr_parallel_serial.md", speed_markdown(runs))
     _write_csv(out_dir / "racr_runs.csv", runs)
-    summary = {"protocol": proto, "config": config.to_dict(), "runs": len(runs), "per_method": summarize(runs),
+    summary = {"config": config.to_dict(), "node": node.to_dict(), "runs": len(runs), "per_method": summarize(runs),
                "done_means": done_means(runs)}
     write_text_atomic(out_dir / "racr_summary.json", json.dumps(summary, indent=1, default=float) + "\n")
     _plots(out_dir, runs)

@@ -7,23 +7,20 @@ to place the platform and to score the result.
    repeat 0, else a seeded draw of 5–12 cm along a random direction and 4–10° about a random axis); every method of
    a (scene, lighting, repeat) starts there with the same noise seeds (§5.2.1). The VSE stand-in renders under the
    session lighting (``similar`` or ``varied``), the reference was captured under ``reference``.
-2. *Initialization (§3.2, Eq. 4–8):* ``init_motions`` out-and-back excursions about the hand's x, y, z axes in turn;
-   :func:`~lightfast.racr.initialize` gives X̂ (``T_cam_hand``) and the real scale ŝ (m per VSE unit) from the
-   reported hand motions and the VSE's (monocular, drifting, noisy) camera motions; their duration is
-   ``time_init_s``.
-3. *VSE scaling (§3.3):* every VSE observation (semi-dense cloud, pose ``T_vse_cam``, keyframes) is put in metres by
-   ŝ, images in [0, 1].
-4. *Alignment loop (§3.5–3.6):* :class:`~lightfast.racr.RacrScheme` driven by explicit alignment jobs in a
-   discrete-event simulation. The VSE publishes one frame (1/15 s) after every platform stop, and
-   ``vse_idle_period_s`` after the scheme ran out of work; jobs are charged the paper's or their measured duration,
-   motions :func:`~lightfast.sim.racr_platform.motion_duration_s`. Parallel mode aligns while the platform moves;
-   serial mode aligns nothing while it moves and each stop waits for the newest observation's fast and fine
-   alignment. Stop: g ≤ η, ``max_adjustments``, ``max_time_s``, a refused motion, or nothing left to wait for.
-5. *ACR* (:class:`~lightfast.racr.AcrBaseline`): the image rendered under the session lighting at the true camera
+2. *rACR* is :class:`~lightfast.racr.session.RacrSession`, the code ``racr_node`` runs, with the method's node
+   configuration (:func:`~lightfast.eval.racr.protocol.method_config`), on a simulated clock and without its
+   alignment thread: the session issues its initialization motions (§3.2) and then the adjustments (§3.5–3.6); the
+   platform executes them (:func:`~lightfast.sim.racr_platform.motion_duration_s`) and reports its stop; the VSE
+   publishes one frame (1/15 s) after every stop and ``vse_idle_period_s`` after the session ran out of work;
+   alignment jobs are run here and charged the paper's or their measured duration (parallel: while the platform
+   moves; serial: the scheme waits for them). Stop: the session's stage ``converged`` (or a failure stage),
+   ``max_adjustments``, ``max_time_s``, a refused motion, or nothing left to wait for.
+3. *ACR* (:class:`~lightfast.racr.AcrBaseline`): the image rendered under the session lighting at the true camera
    against the reference image; ``acr_step_s`` plus the motion per iteration, up to ``acr_max_iterations``; a failed
    estimate ends the run where the camera is.
-6. *Score:* the AFD (:meth:`~lightfast.sim.racr.RacrScene.afd`, px) of the final true camera against the
-   reference; success if < 3 px. Output: a :class:`~lightfast.eval.racr.records.RunRecord` traced after every motion.
+4. *Score:* the AFD (:meth:`~lightfast.sim.racr.RacrScene.afd`, px) of the final true camera against the
+   reference; success if < 3 px; ``reported`` is the method's own verdict (the session's final stage). Output: a
+   :class:`~lightfast.eval.racr.records.RunRecord` traced after every motion.
 """
 from __future__ import annotations
 
@@ -38,24 +35,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from lightfast.eval.errors import RacrEvalError
-from lightfast.eval.racr.protocol import AFD_SUCCESS_PX, METHODS, RacrEvalConfig, protocol_hash
+from lightfast.eval.racr.protocol import AFD_SUCCESS_PX, METHODS, RacrEvalConfig, method_config
 from lightfast.eval.racr.records import RunRecord, TracePoint
-from lightfast.geometry import inverse, make_transform, rotation_angle_deg, so3_exp
-from lightfast.racr import (
-    AcrBaseline,
-    AcrConfig,
-    AdjustmentConfig,
-    FastAlignmentConfig,
-    FineAlignmentConfig,
-    InitializationConfig,
-    Keyframe,
-    RacrError,
-    RacrScheme,
-    ReferenceCloud,
-    SchemeConfig,
-    initialize,
-    relative_motions,
-)
+from lightfast.geometry import make_transform, rotation_angle_deg, so3_exp
+from lightfast.racr import AcrBaseline, AcrConfig, RacrError
+from lightfast.racr.initialization import HandEyeResult
+from lightfast.racr.node_config import RacrNodeConfig
+from lightfast.racr.session import RacrSession
 from lightfast.sim.errors import PlatformError
 from lightfast.sim.racr_platform import PlatformSimulator, VseObservation, VseStandIn
 
@@ -93,7 +79,7 @@ def _trace_point(scene: Any, platform: PlatformSimulator, index: int, t: float, 
     return TracePoint(index, t, afd, pos, rot, g)
 
 
-class _Session:
+class _Devices:
     """The simulated devices of one run: platform (true X), VSE stand-in under the session lighting."""
 
     def __init__(self, scene: Any, lighting: str, repeat: int, config: RacrEvalConfig) -> None:
@@ -109,98 +95,80 @@ class _Session:
         self.seed = seed
 
 
-def _init_motion(k: int, config: RacrEvalConfig) -> Array:
-    axis = np.eye(3)[k % 3]
-    return make_transform(so3_exp(axis * math.radians(config.init_rotation_deg)),
-                          config.init_translation_m * axis)
+class _PerturbedSession(RacrSession):
+    """The §3.7 study: the session with a known rotation error injected into the X of its initialization."""
 
+    error_deg = 0.0
+    seed = 0
 
-def _initialize(session: _Session, config: RacrEvalConfig) -> tuple[Array, float, float, dict[str, Any]]:
-    """§3.2 from the platform's own excursions: returns ``(X̂, ŝ, simulated seconds, details)``."""
-    plat, vse = session.platform, session.vse
-    hand = [plat.reported_hand_pose]
-    cam = [vse.pose(plat.true_camera_pose)]
-    seconds = 0.0
-    for k in range(config.init_motions):
-        M = _init_motion(k, config)
-        for motion in (M, inverse(M)):
-            seconds += plat.execute(motion)
-            hand.append(plat.reported_hand_pose)
-            cam.append(vse.pose(plat.true_camera_pose))
-    result = initialize(relative_motions(np.stack(cam)), relative_motions(np.stack(hand)),
-                        config=InitializationConfig(method=config.init_method))
-    X_hat = result.T_cam_hand
-    if config.handeye_error_deg > 0.0:  # §3.7 study: rotate R̂_X by a known angle about a seeded random axis
-        rng = np.random.default_rng(session.seed + 7)
+    def _hand_eye_result(self, result: HandEyeResult) -> HandEyeResult:
+        rng = np.random.default_rng(self.seed + 7)
         axis = rng.normal(size=3)
         axis /= np.linalg.norm(axis)
-        X_hat = make_transform(so3_exp(axis * math.radians(config.handeye_error_deg)) @ X_hat[:3, :3], X_hat[:3, 3])
-    X = plat.truth_T_cam_hand
-    s_true = session.vse.scale_m_per_vse
-    details = {
-        "scale_estimated": result.scale_m_per_vse, "scale_true": s_true,
-        "scale_error_rel": result.scale_m_per_vse / s_true - 1.0,
+        X = result.T_cam_hand
+        X_err = make_transform(so3_exp(axis * math.radians(self.error_deg)) @ X[:3, :3], X[:3, 3])
+        return replace(result, T_cam_hand=X_err)
+
+
+def _observation(obs: VseObservation) -> tuple[Array, Array, Array, list[tuple[Array, Array, Any]]]:
+    """A VSE observation as the node reads it from the VSE's topics: cloud and poses in VSE units, intensities and
+    keyframe images in [0, 1] (mono8 / 255)."""
+    kfs = [(k.image.astype(np.float64) / 255.0, np.asarray(k.T_vse_cam, np.float64), k.camera)
+           for k in obs.keyframes]
+    return obs.points_vse.astype(np.float64), obs.intensity.astype(np.float64), obs.T_vse_cam, kfs
+
+
+def _initialization_details(session: _Devices, racr: RacrSession) -> dict[str, Any]:
+    """The initialization's errors against the truth (scale, hand–eye), for the record."""
+    he = racr.status.hand_eye
+    if he is None:
+        return {}
+    X_hat, X, s_true = he.T_cam_hand, session.platform.truth_T_cam_hand, session.vse.scale_m_per_vse
+    return {
+        "scale_estimated": he.scale_m_per_vse, "scale_true": s_true, "scale_error_rel": he.scale_m_per_vse / s_true - 1,
         "handeye_rotation_error_deg": float(rotation_angle_deg(X_hat[:3, :3], X[:3, :3])),
         "handeye_angle_difference_deg": abs(float(rotation_angle_deg(X_hat[:3, :3]))
                                             - float(rotation_angle_deg(X[:3, :3]))),
         "handeye_translation_error_mm": 1e3 * float(np.linalg.norm(X_hat[:3, 3] - X[:3, 3])),
     }
-    return X_hat, result.scale_m_per_vse, seconds, details
 
 
-def _to_scheme(obs: VseObservation, s: float) -> tuple[Array, Array, Array, list[Keyframe]]:
-    """A VSE observation in real scale (§3.3): points and poses times ŝ, images in [0, 1]."""
-    def scaled(T: Array) -> Array:
-        out = np.array(T, dtype=np.float64)
-        out[:3, 3] *= s
-        return out
-
-    kfs = [Keyframe(k.image.astype(np.float64) / 255.0, scaled(k.T_vse_cam), k.camera) for k in obs.keyframes]
-    return s * obs.points_vse.astype(np.float64), obs.intensity.astype(np.float64), scaled(obs.T_vse_cam), kfs
+_ENDED = ("converged", "initialization_failed", "failed", "platform_timeout")
 
 
-def _scheme_configs(method: str, config: RacrEvalConfig) -> tuple[SchemeConfig, FastAlignmentConfig,
-                                                                   FineAlignmentConfig]:
-    spec = METHODS[method]
-    assert spec is not None
-    mode, fine, refine, scale = spec
-    return (SchemeConfig(mode=mode, fine_alignment=fine), FastAlignmentConfig(estimate_scale=scale),
-            FineAlignmentConfig(refine_keyframes=refine, estimate_scale=scale))
-
-
-def _run_racr(scene: Any, session: _Session, method: str, config: RacrEvalConfig,
+def _run_racr(scene: Any, devices: _Devices, node: RacrNodeConfig, config: RacrEvalConfig,
               record: RunRecord) -> None:
-    plat, vse = session.platform, session.vse
-    try:
-        X_hat, s_hat, t_init, details = _initialize(session, config)
-    except RacrError as exc:
-        record.stop_reason = f"initialization failed: {exc}"
-        return
-    record.time_init_s = t_init
-    record.details.update(details)
-    scheme_cfg, fast_cfg, fine_cfg = _scheme_configs(method, config)
-    ref = scene.reference
-    reference = ReferenceCloud.from_config(np.asarray(ref.points_m, np.float64), fast_cfg)
+    plat, vse = devices.platform, devices.vse
     now = [0.0]
-    scheme = RacrScheme(reference, ref.T_ref_camref, X_hat, config=scheme_cfg, fast_config=fast_cfg,
-                        fine_config=fine_cfg, adjustment_config=AdjustmentConfig(eta=config.eta),
-                        clock=lambda: now[0])
+    session_class: type[RacrSession] = RacrSession
+    if config.handeye_error_deg > 0.0:
+        session_class = type("_Perturbed", (_PerturbedSession,), {"error_deg": config.handeye_error_deg,
+                                                                  "seed": devices.seed})
+    racr = node.start_session(scene.reference, clock=lambda: now[0], threaded=False, session_class=session_class)
 
     def observe() -> None:
-        pts, inten, T_A, kfs = _to_scheme(vse.observe(plat.true_camera_pose, stamp_s=now[0]), s_hat)
         try:
-            scheme.add_vse_observation(pts, inten, T_A, kfs, stamp=now[0])
+            points, intensity, T_vse_cam, kfs = _observation(vse.observe(plat.true_camera_pose, stamp_s=now[0]))
+            racr.add_vse_observation(points, intensity, T_vse_cam, kfs, stamp=now[0])
         except RacrError as exc:  # an unusable cloud: the VSE publishes again later
             log.debug("VSE observation refused: %s", exc)
 
-    record.trace.append(_trace_point(scene, plat, 0, 0.0))
+    racr.add_platform_pose(plat.reported_hand_pose, stamp=0.0)
     observe()
     job, job_end = None, math.inf
     arrival: float | None = None
     next_obs: float | None = None
     reason = "time limit"
     while now[0] <= config.max_time_s:
-        if job is None:
+        scheme = racr.scheme
+        if scheme is not None and not record.trace:  # the initialization is over: the loop starts
+            record.time_init_s = now[0]
+            record.details.update(_initialization_details(devices, racr))
+            record.trace.append(TracePoint(0, now[0], *_errors(scene, plat.true_camera_pose)))
+        if racr.status.stage in _ENDED:
+            reason = racr.status.stage
+            break
+        if job is None and scheme is not None:
             job = scheme.next_alignment_job()
             if job is not None:
                 job.run()
@@ -208,25 +176,23 @@ def _run_racr(scene: Any, session: _Session, method: str, config: RacrEvalConfig
                     config.fine_s if job.kind == "fine" else config.fast_s * job.alignments)
                 job_end = now[0] + cost
         if arrival is None:
-            step = scheme.next_hand_motion()
-            if step is not None:
-                if step.converged:
-                    record.converged = True
-                    reason = "converged"
-                    break
-                if record.adjustments >= config.max_adjustments:
+            cmd = racr.next_hand_motion()
+            if cmd is not None:
+                if cmd.kind == "adjustment" and record.adjustments >= config.max_adjustments:
                     reason = "adjustment limit"
                     break
-                scheme.add_platform_pose(plat.reported_hand_pose, moving=True, stamp=now[0])
                 try:
-                    arrival = now[0] + plat.execute(step.M_hand)
+                    arrival = now[0] + plat.execute(cmd.M_hand)
                 except PlatformError as exc:
                     reason = f"platform refused the motion: {exc}"
                     break
-                record.adjustments += 1
-                record.trace.append(TracePoint(record.adjustments, arrival, *_errors(scene, plat.true_camera_pose),
-                                               g=step.g))
+                if cmd.kind == "adjustment":
+                    record.adjustments += 1
+                    record.trace.append(TracePoint(record.adjustments, arrival - record.time_init_s,
+                                                   *_errors(scene, plat.true_camera_pose), g=cmd.g or math.nan))
                 next_obs = None
+                continue
+            if racr.status.stage in _ENDED:
                 continue
         if job is None and arrival is None and next_obs is None:
             next_obs = now[0] + config.vse_idle_period_s  # nothing to do: wait for the VSE's next output
@@ -235,28 +201,38 @@ def _run_racr(scene: Any, session: _Session, method: str, config: RacrEvalConfig
         if not math.isfinite(now[0]):
             reason = "stalled"
             break
-        if job is not None and now[0] >= job_end:
+        if job is not None and scheme is not None and now[0] >= job_end:
             scheme.commit(job)
             job, job_end = None, math.inf
         if arrival is not None and now[0] >= arrival:
             arrival = None
-            scheme.add_platform_pose(plat.reported_hand_pose, moving=False, stamp=now[0])
+            racr.platform_stopped(plat.reported_hand_pose, stamp=now[0])
             next_obs = now[0] + config.vse_frame_s
         elif next_obs is not None and now[0] >= next_obs:
             next_obs = None
             observe()
-    record.stop_reason = reason
-    record.time_loop_s = min(now[0], config.max_time_s)
-    st = scheme.status
-    record.details.update({
-        "fast_alignments": st.fast_alignments, "fine_alignments": st.fine_alignments,
-        "alignment_failures": st.alignment_failures, "observations": st.observations,
-        "dropped_observations": st.dropped_observations, "last_alignment_error": st.last_alignment_error,
-        "final_g": st.g, "sigma_p": st.sigma,
-    })
+    st = racr.status
+    record.stop_reason = f"{reason}: {st.message}" if reason in _ENDED and reason != "converged" else reason
+    record.converged = st.stage == "converged"
+    record.reported = st.stage
+    record.time_loop_s = min(now[0], config.max_time_s) - record.time_init_s
+    if not record.trace:  # the initialization never finished
+        record.time_init_s = min(now[0], config.max_time_s)
+        record.time_loop_s = 0.0
+        record.trace.append(TracePoint(0, 0.0, *_errors(scene, plat.true_camera_pose)))
+    sch = st.scheme
+    if sch is not None:
+        record.details.update({
+            "fast_alignments": sch.fast_alignments, "fine_alignments": sch.fine_alignments,
+            "alignment_failures": sch.alignment_failures, "observations": sch.observations,
+            "dropped_observations": sch.dropped_observations, "last_alignment_error": sch.last_alignment_error,
+            "final_g": sch.g, "sigma_p": sch.sigma,
+        })
+    if st.init_error:
+        record.details["init_error"] = st.init_error
 
 
-def _run_acr(scene: Any, session: _Session, config: RacrEvalConfig, record: RunRecord) -> None:
+def _run_acr(scene: Any, session: _Devices, config: RacrEvalConfig, record: RunRecord) -> None:
     plat = session.platform
     ref = scene.reference
     record.trace.append(_trace_point(scene, plat, 0, 0.0))
@@ -295,24 +271,26 @@ def _run_acr(scene: Any, session: _Session, config: RacrEvalConfig, record: RunR
     record.details.update({"acr_halvings": acr.halvings, "acr_step_m": acr.step_m})
 
 
-def run_one(scene: Any, lighting: str, method: str, repeat: int = 0,
-            config: RacrEvalConfig | None = None) -> RunRecord:
-    """One run of the protocol (module documentation) on a loaded :class:`~lightfast.sim.racr.RacrScene`."""
+def run_one(scene: Any, lighting: str, method: str, repeat: int = 0, config: RacrEvalConfig | None = None,
+            node: RacrNodeConfig | None = None, key: str = "") -> RunRecord:
+    """One run of the protocol (module documentation) on a loaded :class:`~lightfast.sim.racr.RacrScene`; ``node``:
+    the rACR node's configuration the methods start from (default: the node's defaults); ``key``: the record's."""
     config = config or RacrEvalConfig()
     if method not in METHODS:
         raise RacrEvalError(f"unknown method {method!r}; choose from {', '.join(METHODS)}")
     if lighting not in scene.lightings:
         raise RacrEvalError(f"scene {scene.spec.name} has no lighting {lighting!r}")
     wall0 = time.perf_counter()
-    session = _Session(scene, lighting, repeat, config)
-    afd0 = scene.afd(session.platform.true_camera_pose).afd_px
-    record = RunRecord(scene.spec.name, scene.spec.kind, lighting, method, repeat, protocol_hash(config),
-                       math.inf, False, afd0, 0, False, "", 0.0, 0.0, 0.0)
+    devices = _Devices(scene, lighting, repeat, config)
+    afd0 = scene.afd(devices.platform.true_camera_pose).afd_px
+    record = RunRecord(scene.spec.name, scene.spec.kind, lighting, method, repeat, key, math.inf, False, afd0, 0,
+                       False, "", 0.0, 0.0, 0.0)
     if method == "acr":
-        _run_acr(scene, session, config, record)
+        _run_acr(scene, devices, config, record)
+        record.reported = "converged" if record.converged else "stopped"
     else:
-        _run_racr(scene, session, method, config, record)
-    record.afd_px = scene.afd(session.platform.true_camera_pose).afd_px
+        _run_racr(scene, devices, method_config(method, node or RacrNodeConfig(), config), config, record)
+    record.afd_px = scene.afd(devices.platform.true_camera_pose).afd_px
     record.success = bool(record.afd_px < AFD_SUCCESS_PX)
     record.wall_s = time.perf_counter() - wall0
     return record

@@ -95,6 +95,21 @@ def test_the_evaluation_resumes_without_repeating_runs(evaluated, scenes_dir: Pa
     assert len(new) == 1 and len(load_records(out)) == 4
 
 
+def test_a_scene_of_another_seed_under_the_same_name_is_run_again(evaluated, tmp_path: Path) -> None:
+    """The cache is keyed by the scene's content: S14 of another scene-set seed is another scene (issue 19: a
+    seed-7919 set evaluated into a folder of seed-0 results reused them)."""
+    out, _, _ = evaluated
+    other = tmp_path / "scenes_seed1"
+    generate_racr_set(other, scenes=["S14"], width=160, height=120, resolution_m=0.01, previews=False, seed=1)
+    before = {r.key for r in load_records(out)}
+    new: list = []
+    runs = evaluate_racr(other, out, methods=["acr"], lightings=["varied"], progress=False, on_run=new.append)
+    assert len(new) == 1 and new[0].key not in before and [r.key for r in runs] == [new[0].key]
+    again: list = []
+    evaluate_racr(other, out, methods=["acr"], lightings=["varied"], progress=False, on_run=again.append)
+    assert again == []
+
+
 def test_every_method_starts_from_the_same_pose(scenes_dir: Path) -> None:
     scene = load_scene(scenes_dir / "S14")
     T0 = initial_offset(scene, 0)
