@@ -35,7 +35,6 @@ from typing import Any
 from geometry_msgs.msg import PoseStamped, TransformStamped
 from rclpy.timer import Timer
 
-from lightfast.config import ConfigError
 from lightfast.ros.convert import matrix_to_pose_stamped
 from lightfast.ros.diagnostics import Level
 from lightfast.ros.errors import ConversionError
@@ -43,8 +42,7 @@ from lightfast.ros.node import LightfastNode
 from lightfast.ros.qos import OUTPUT_QOS
 from lightfast.ros.racr_msgs import transform_stamped_to_matrix
 from lightfast.ros.runtime import run_node
-from lightfast.sim.racr import load_scene
-from lightfast.sim.racr_live import RacrPlatformSimConfig, TimedPlatform
+from lightfast.sim.racr_live import RacrPlatformSimConfig, TimedPlatform, load_node_scene
 from lightfast.topics import (
     PLATFORM_BASE_FRAME,
     PLATFORM_HAND_FRAME,
@@ -63,9 +61,7 @@ class RacrPlatformSimNode(LightfastNode[RacrPlatformSimConfig]):
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(NODE_NAME, RacrPlatformSimConfig, status_topic=PLATFORM_STATUS_TOPIC, **kwargs)
         cfg = self.params.config
-        if not cfg.scene_path:
-            raise ConfigError("parameter scene_path is required (a scene directory of `lightfast sim racr`)")
-        scene = load_scene(cfg.scene_path)
+        scene = load_node_scene(cfg.scene_path)
         self.scene_name = scene.spec.name
         self.platform = TimedPlatform(scene.make_platform(cfg.platform_config(), seed=cfg.seed),
                                       time_scale=cfg.time_scale)

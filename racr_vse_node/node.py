@@ -31,7 +31,6 @@ from geometry_msgs.msg import PoseStamped, TransformStamped
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 
-from lightfast.config import ConfigError
 from lightfast.errors import LightfastError
 from lightfast.ros.convert import (
     camera_info_from_camera,
@@ -46,8 +45,7 @@ from lightfast.ros.node import LightfastNode
 from lightfast.ros.qos import OUTPUT_QOS
 from lightfast.ros.racr_msgs import matrix_to_transform_stamped
 from lightfast.ros.runtime import run_node
-from lightfast.sim.racr import load_scene
-from lightfast.sim.racr_live import RacrVseSimConfig
+from lightfast.sim.racr_live import RacrVseSimConfig, load_node_scene
 from lightfast.sim.racr_platform import VseObservation
 from lightfast.topics import (
     SIM_CAMERA_POSE_TOPIC,
@@ -70,9 +68,7 @@ class RacrVseNode(LightfastNode[RacrVseSimConfig]):
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(NODE_NAME, RacrVseSimConfig, status_topic=VSE_STATUS_TOPIC, **kwargs)
         cfg = self.params.config
-        if not cfg.scene_path:
-            raise ConfigError("parameter scene_path is required (a scene directory of `lightfast sim racr`)")
-        scene = load_scene(cfg.scene_path)
+        scene = load_node_scene(cfg.scene_path)
         self.scene_name = scene.spec.name
         self.vse = scene.make_vse(cfg.lighting, config=cfg.vse_config(), seed=cfg.seed,
                                   scale_m_per_vse=cfg.scale_m_per_vse or None)

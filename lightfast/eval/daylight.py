@@ -276,8 +276,17 @@ def _plots(out: Path, runs: Sequence[SequenceRun], sim_dir: Path) -> list[Path]:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure
 
-    written = []
+    written: list[Path] = []
+
+    def save(fig: Figure, name: str) -> None:
+        fig.tight_layout()
+        p = out / name
+        fig.savefig(p, dpi=80)
+        plt.close(fig)
+        written.append(p)
+
     seqs = sorted({r.sequence for r in runs})
     methods = list(dict.fromkeys(r.method for r in runs))
     by = {(r.sequence, r.method): r for r in runs}
@@ -301,11 +310,7 @@ def _plots(out: Path, runs: Sequence[SequenceRun], sim_dir: Path) -> list[Path]:
     axes[0, 1].legend(fontsize=7)
     axes[-1, 0].set_xlabel("frame")
     axes[-1, 1].set_xlabel("x [m] (top view)")
-    fig.tight_layout()
-    p = out / "daylight_tracking.png"
-    fig.savefig(p, dpi=80)
-    plt.close(fig)
-    written.append(p)
+    save(fig, "daylight_tracking.png")
     # estimated vs true brightness (proposed) for the cloudy sequences and one clear one
     shown = [s for s in seqs if s.endswith("T6")] + [s for s in seqs if s.endswith("T1")]
     if shown and any((s, "proposed") in by for s in shown):
@@ -323,11 +328,7 @@ def _plots(out: Path, runs: Sequence[SequenceRun], sim_dir: Path) -> list[Path]:
             ax.set_ylabel(s)
             ax.legend(fontsize=7)
         axes[-1, 0].set_xlabel("frame")
-        fig.tight_layout()
-        p = out / "daylight_brightness.png"
-        fig.savefig(p, dpi=80)
-        plt.close(fig)
-        written.append(p)
+        save(fig, "daylight_brightness.png")
     return written
 
 

@@ -25,10 +25,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from lightfast.config import param
+from lightfast.config import ConfigError, param
 from lightfast.geometry import inverse, rotation_angle_deg
 from lightfast.sim.errors import PlatformError
-from lightfast.sim.racr import RacrScene
+from lightfast.sim.racr import RacrScene, load_scene
 from lightfast.sim.racr_platform import PlatformConfig, PlatformSimulator, VseConfig
 
 __all__ = [
@@ -39,6 +39,7 @@ __all__ = [
     "RacrVseSimConfig",
     "TimedPlatform",
     "evaluate_final_pose",
+    "load_node_scene",
 ]
 
 Array = NDArray[np.float64]
@@ -49,6 +50,13 @@ LIGHTINGS = ("reference", "similar", "varied")
 
 def _base_config(cfg: Any, base: type) -> Any:
     return base(**{f.name: getattr(cfg, f.name) for f in dataclasses.fields(base)})
+
+
+def load_node_scene(scene_path: str) -> RacrScene:
+    """The scene of a simulator node's ``scene_path`` parameter (:class:`ConfigError` when it is empty)."""
+    if not scene_path:
+        raise ConfigError("parameter scene_path is required (a scene directory of `lightfast sim racr`)")
+    return load_scene(scene_path)
 
 
 @dataclass(frozen=True)

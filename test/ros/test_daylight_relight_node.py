@@ -36,7 +36,7 @@ from lightfast.ros.convert import (
     numpy_to_pointcloud2,
     stamp_to_ns,
 )
-from lightfast.ros.diagnostics import Level, diagnostic_level, diagnostic_values
+from lightfast.ros.diagnostics import Level
 from lightfast.ros.qos import OUTPUT_QOS
 from lightfast.ros.spin import spin_until
 from lightfast.topics import (
@@ -51,20 +51,12 @@ from lightfast.topics import (
     SUN_CHUNK_TOPIC,
 )
 from sun_update_node.node import CHUNK_DTYPE
+from test.ros.probe import StatusProbe
+from test.unit.test_brightness import look_at
 
 S_TRUE = np.array([[800.0, 760.0, 680.0], [60.0, 70.0, 90.0], [30.0, 28.0, 24.0]])  # sun, sky, ground
 T0_S = 1_700_000_000
 TIMEOUT_S = 15.0
-
-
-def look_at(p, forward) -> np.ndarray:
-    z = np.asarray(forward, float) / np.linalg.norm(forward)
-    x = np.cross(z, [0.0, 0.0, 1.0])
-    x /= np.linalg.norm(x)
-    T = np.eye(4)
-    T[:3, :3] = np.stack([x, np.cross(z, x), z], axis=1)
-    T[:3, 3] = p
-    return T
 
 
 @dataclass
@@ -114,8 +106,10 @@ def chunk_messages(radiosity: np.ndarray, epoch_ns: int, chunk_vertices: int = 4
     return msgs
 
 
-class Probe:
+class Probe(StatusProbe):
     """A test node: publishers for the node's inputs, recorders of its outputs (keyed by stamp)."""
+
+    timeout_s = TIMEOUT_S
 
     def __init__(self, make_node: Callable[..., Node], executor: Executor, outputs: dict[str, tuple[type, str]],
                  inputs: dict[str, tuple[type, str]]) -> None:
@@ -139,23 +133,8 @@ class Probe:
         assert spin_until(self.executor, lambda: all(p.get_subscription_count() > 0 for p in self.pubs.values())
                           and all(s.get_publisher_count() > 0 for s in self.subs), TIMEOUT_S)
 
-    def spin_until(self, predicate: Callable[[], bool], timeout_s: float = TIMEOUT_S) -> bool:
-        return spin_until(self.executor, predicate, timeout_s)
-
     def publish(self, key: str, msg: object) -> None:
         self.pubs[key].publish(msg)
-
-    def statuses(self) -> list[tuple[Level, str, dict[str, str]]]:
-        return [(diagnostic_level(s), s.message, diagnostic_values(s)) for a in self.status for s in a.status]
-
-    def wait_status(self, predicate: Callable[[Level, str, dict[str, str]], bool],
-                    timeout_s: float = TIMEOUT_S) -> tuple[Level, str, dict[str, str]]:
-        def found() -> tuple[Level, str, dict[str, str]] | None:
-            return next((s for s in self.statuses() if predicate(*s)), None)
-        assert self.spin_until(lambda: found() is not None, timeout_s), self.statuses()[-5:]
-        result = found()
-        assert result is not None
-        return result
 
 
 @pytest.fixture(scope="module")

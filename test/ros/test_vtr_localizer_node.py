@@ -38,10 +38,9 @@ from lightfast.ros.convert import (
     pose_to_matrix,
     stamp_to_ns,
 )
-from lightfast.ros.diagnostics import Level, diagnostic_level, diagnostic_values
+from lightfast.ros.diagnostics import Level
 from lightfast.ros.msgtypes import RCLPY, MessageTypes
 from lightfast.ros.qos import OUTPUT_QOS
-from lightfast.ros.spin import spin_until
 from lightfast.ros.tf import TF_QOS, TF_TOPIC
 from lightfast.topics import (
     STEREO_LEFT_FRAME,
@@ -59,6 +58,7 @@ from lightfast.topics import (
     VTR_STATUS_TOPIC,
 )
 from lightfast.vtr import MapExistsError, MapStore, TeachConfig, TeachMap, TeachPipeline
+from test.ros.probe import StatusProbe
 from test.unit.vtr import test_teach_repeat as corridor
 from vtr_localizer_node.node import VtrLocalizerNode
 
@@ -130,8 +130,10 @@ OUTPUTS = {"localization": (PoseWithCovarianceStamped, VTR_LOCALIZATION_TOPIC), 
            "fv": (Image, VTR_FV_TOPIC), "fr": (Image, VTR_FR_TOPIC)}
 
 
-class Probe:
+class Probe(StatusProbe):
     """A test node: publishers of the node's inputs, recorders of its outputs (by stamp), the finish client."""
+
+    timeout_s = TIMEOUT_S
 
     def __init__(self, make_node: Callable[..., Node], executor: Executor) -> None:
         self.executor = executor
@@ -159,9 +161,6 @@ class Probe:
                                and all(s.get_publisher_count() == 1 for s in self.subs)
                                and self.client.service_is_ready())
 
-    def spin_until(self, predicate: Callable[[], bool], timeout_s: float = TIMEOUT_S) -> bool:
-        return spin_until(self.executor, predicate, timeout_s)
-
     def publish(self, key: str, msg: object) -> None:
         self.pubs[key].publish(msg)
 
@@ -176,18 +175,6 @@ class Probe:
                 ("right", numpy_to_image(right, "rgb8", stamp_ns=stamp_ns, frame_id=STEREO_RIGHT_FRAME))]
         for key, msg in reversed(msgs) if right_first else msgs:
             self.publish(key, msg)
-
-    def statuses(self) -> list[tuple[Level, str, dict[str, str]]]:
-        return [(diagnostic_level(s), s.message, diagnostic_values(s)) for a in self.status for s in a.status]
-
-    def wait_status(self, predicate: Callable[[Level, str, dict[str, str]], bool],
-                    timeout_s: float = TIMEOUT_S) -> tuple[Level, str, dict[str, str]]:
-        def found() -> tuple[Level, str, dict[str, str]] | None:
-            return next((s for s in self.statuses() if predicate(*s)), None)
-        assert self.spin_until(lambda: found() is not None, timeout_s), self.statuses()[-5:]
-        result = found()
-        assert result is not None
-        return result
 
     def frame_status(self, stamp_ns: int) -> tuple[Level, str, dict[str, str]]:
         return self.wait_status(lambda lvl, msg, v: v.get("stamp_ns") == str(stamp_ns))
