@@ -45,6 +45,7 @@ from lightfast.daylight.lighting_map import LightingMap, LightingMapConfig
 from lightfast.daylight.relight import DaylightRelighter, RelightConfig
 from lightfast.daylight.sun import sun_position
 from lightfast.daylight.sun_update import sun_radiosity
+from lightfast.eval.cache import code_version, content_digest, run_key
 from lightfast.eval.errors import DaylightEvalError
 from lightfast.geometry import rotation_angle_deg
 from lightfast.io import write_text_atomic
@@ -419,21 +420,24 @@ def _scene_of(seq_dir: Path) -> str:
     return str(json.loads((seq_dir / "sequence.json").read_text())["sequence"]["scene"])
 
 
-def _run_key(seq_dir: Path, method: str, map_meta: dict, max_frames: int | None) -> str:
-    """A hash of everything that decides one run's outcome."""
-    import hashlib
+#: The code a run executes (its version is part of the run's key).
+CODE = ("daylight", "tracking", "eval/daylight.py", "bag", "geometry", "camera.py", "raycast.py", "config.py")
 
+
+def _run_key(seq_dir: Path, method: str, map_meta: dict, max_frames: int | None) -> str:
+    """A hash of everything that decides one run's outcome (:mod:`lightfast.eval.cache`)."""
     _, reference, brightness = METHODS[method]
     parts = {
         "protocol": PROTOCOL_VERSION,
-        "recording": json.loads((seq_dir / "sequence.json").read_text()).get("params_hash"),
+        "recording": content_digest(seq_dir),  # every file: another seed or simulator version is another input
+        "code": code_version(*CODE),
         "map": {k: map_meta.get(k) for k in ("mesh_sha256", "config", "site", "format_version")},
         "method": method,
         "tracker": dataclasses.asdict(TrackerConfig(mode=METHODS[method][0])),
         "relight": dataclasses.asdict(RelightConfig(reference=reference, method=brightness)),
         "max_frames": max_frames,
     }
-    return hashlib.sha256(json.dumps(parts, sort_keys=True, default=str).encode()).hexdigest()[:16]
+    return run_key(parts)
 
 
 def _run_path(out_dir: Path, sequence: str, method: str) -> Path:

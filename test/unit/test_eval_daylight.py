@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import csv
 import json
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -70,6 +71,15 @@ def test_evaluation_writes_table_csv_json_and_plots(sim_dir: Path, tmp_path: Pat
     short = evaluate_daylight(sim_dir, out, methods=["proposed"], maps_dir=tmp_path / "maps", max_frames=5,
                               progress=False, map_config=MAP, on_run=lambda r: ran.append(r.method))
     assert ran == ["depth-only", "proposed"] and len(short[0].frames) == 5
+    # ... and so is a recording whose content changed under the same name (another seed or simulator version)
+    other = tmp_path / "sim_other"
+    shutil.copytree(sim_dir, other)
+    info = other / "DS1.T6" / "sequence.json"
+    info.write_text(info.read_text() + "\n")
+    ran.clear()
+    evaluate_daylight(other, out, methods=["depth-only"], maps_dir=tmp_path / "maps", progress=False,
+                      map_config=MAP, on_run=lambda r: ran.append(r.method))
+    assert ran == ["depth-only"]
 
 
 def test_bad_inputs_are_clear_errors(sim_dir: Path, tmp_path: Path) -> None:

@@ -18,7 +18,6 @@ Runs go in-process or in ``jobs`` spawned processes, each loading the map once.
 """
 from __future__ import annotations
 
-import hashlib
 import json
 import logging
 import math
@@ -32,6 +31,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from lightfast.config import config_from_mapping, replace_config
+from lightfast.eval.cache import code_version, content_digest, run_key
 from lightfast.eval.errors import VtrEvalError
 from lightfast.eval.vtr.inputs import SimRun, Truth, load_truth, sim_runs, stereo_frames
 from lightfast.eval.vtr.report import write_outputs
@@ -51,13 +51,18 @@ log = logging.getLogger(__name__)
 EVAL_FORMAT = 1
 
 
+#: The code a run executes (its version is part of the run's key).
+CODE = ("vtr", "eval/vtr", "bag", "geometry", "config.py")
+
+
 def _key(*parts: object) -> str:
-    return hashlib.sha256(json.dumps(parts, sort_keys=True, default=str).encode()).hexdigest()[:16]
+    """What decides a result (:mod:`lightfast.eval.cache`): the recording's content (another route seed or
+    simulator version is another recording), the configuration, the code version."""
+    return run_key({"parts": parts, "format": EVAL_FORMAT, "code": code_version(*CODE)})
 
 
 def _teach_key(teach: SimRun, config: VtrLocalizerConfig) -> str:
-    return _key("teach", EVAL_FORMAT, teach.info.get("params_hash"), teach.info.get("frames"),
-                config.teach.to_dict(), config.stereo.to_dict())
+    return _key("teach", content_digest(teach.path), config.teach.to_dict(), config.stereo.to_dict())
 
 
 def teach_map(teach: SimRun, maps_dir: Path, config: VtrLocalizerConfig | None = None, *,
@@ -150,7 +155,7 @@ def run_repeat(run: SimRun, tmap: TeachMap, teach_truth: Truth, mode: str, *,
 
 
 def _job_key(run: SimRun, mode: str, map_key: str, config: VtrLocalizerConfig, max_frames: int | None) -> str:
-    return _key("repeat", EVAL_FORMAT, run.info.get("params_hash"), run.info.get("frames"), mode, map_key,
+    return _key("repeat", content_digest(run.path), mode, map_key,
                 replace_config(config, {"repeat.mode": mode}).repeat.to_dict(), max_frames)
 
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 import csv
 import json
 import math
+import shutil
 import time
 from dataclasses import asdict
 
@@ -114,6 +115,14 @@ def test_eval_on_a_tiny_route(sim_dir, tmp_path):
     untimed = [{k: v for k, v in asdict(f).items() if not k.startswith("ms_")} for f in runs[1].frames[:6]]
     grey = next(r for r in seen if r.mode == "grey")
     assert [{k: v for k, v in asdict(f).items() if not k.startswith("ms_")} for f in grey.frames] == untimed
+    # a recording whose content changed under the same name (another route seed, another simulator) is run again
+    other = tmp_path / "sim_other"
+    shutil.copytree(sim_dir, other)
+    info = other / "repeat_same" / "run.json"
+    info.write_text(info.read_text() + "\n")
+    seen.clear()
+    evaluate_vtr(other, out, modes=("grey",), on_run=seen.append)
+    assert [(r.run, r.mode) for r in seen] == [("repeat_same", "grey")]
 
 
 def test_bad_inputs(sim_dir, tmp_path, capsys):
