@@ -63,6 +63,8 @@ class Localization:
     rms_px: float = float("nan")
     covariance: NDArray[np.float64] = field(default_factory=lambda: np.full((6, 6), np.inf))
     gated: bool = False  # failed only by the prior gate; T_ref_cam is then the rejected pose
+    #: whole-map search: the most inliers of a successful place farther than ``search_distinct_m`` along the path
+    runner_up_inliers: int = 0
 
     @property
     def inliers(self) -> int:

@@ -4,7 +4,9 @@ localizes") — the relocalization after a localization failure (20 m on VO alon
 :func:`search_map` tries every keyframe of the teach map as the reference, with ``search_window_radius`` neighbours
 on each side, by :meth:`~lightfast.vtr.localization.MapLocalizer.localize` without a prior (unguided matching, the
 mode's image sources, PROSAC-ordered RANSAC hypotheses, no prior gate); the localization with the most inliers wins
-(first on ties). Every keyframe lies in up to 2r + 1 windows: during the search each keyframe's landmarks are matched
+(first on ties), and its ``runner_up_inliers`` are those of the best successful place farther than
+``search_distinct_m`` along the taught path, so the caller can refuse a place that a look-alike nearly matches.
+Every keyframe lies in up to 2r + 1 windows: during the search each keyframe's landmarks are matched
 to the frame once per source and the matches are combined per window
 (:meth:`~lightfast.vtr.localization.MapLocalizer.unguided_cache`) — exactly the matches of matching each window at
 once. In ``mcmanus`` mode the colour-constant features are computed once, at the first keyframe where greyscale
@@ -18,6 +20,7 @@ Inputs: the current frame's :class:`~lightfast.vtr.features.StereoFeatures` per 
 from __future__ import annotations
 
 from collections.abc import Mapping
+from dataclasses import replace
 from typing import TYPE_CHECKING
 
 from lightfast.vtr.features import StereoFeatures
@@ -32,8 +35,9 @@ __all__ = ["search_map"]
 def search_map(localizer: MapLocalizer, features: Mapping[str, StereoFeatures], camera: StereoCamera,
                more: FeatureSupplier | None = None) -> Localization:
     """Whole-map search (§IV-C): every keyframe (with ``search_window_radius`` neighbours on each side),
-    unguided; the most inliers win (first on ties)."""
+    unguided; the most inliers win (first on ties); ``runner_up_inliers``: the best distinct place's."""
     best: Localization | None = None
+    found: list[Localization] = []
     r, n = localizer.config.search_window_radius, len(localizer.map)
     # every keyframe is in up to 2r + 1 windows: match its landmarks once (NearestMatches), combine per window
     with localizer.unguided_cache():
@@ -41,7 +45,14 @@ def search_map(localizer: MapLocalizer, features: Mapping[str, StereoFeatures], 
             loc = localizer.localize(features, camera, k, tuple(range(max(0, k - r), min(n, k + r + 1))), None, more)
             if more is not None and localizer.config.mode == "mcmanus" and not loc.success:
                 features, more = more(), None  # computed once; later keyframes reuse them
+            if loc.success:
+                found.append(loc)
             if best is None or (loc.success and (not best.success or loc.inliers > best.inliers)):
                 best = loc
     assert best is not None
+    if best.success:
+        at = localizer.map.distance_m
+        far = [f.inliers for f in found
+               if abs(at[f.ref_index] - at[best.ref_index]) > localizer.config.search_distinct_m]
+        best = replace(best, runner_up_inliers=max(far, default=0))
     return best

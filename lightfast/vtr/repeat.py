@@ -17,7 +17,9 @@ their ``camera_info`` projection matrices in, :class:`RepeatResult` out):
    between them: then the prior is the wrong one (a VO step gone astray).
 5. **Failure handling** (§IV-C): without success the VO prior is the pose and the distance driven on VO alone
    accumulates; beyond ``max_distance_on_vo_m`` (20 m) it is a **localization failure**: the robot "stops" and the
-   whole map is searched (:mod:`lightfast.vtr.map_search`) every frame until it succeeds (``relocalized``). Before
+   whole map is searched (:mod:`lightfast.vtr.map_search`) every frame until it finds a place with the evidence
+   that rules out look-alikes (``search_min_inliers``, ``search_margin`` over the best distinct place; then
+   ``relocalized``). Before
    the first localization the pipeline is in the same state ("the map is searched until the live stereo feed
    localizes"); with ``initial_keyframe`` only the window around that keyframe is tried until the failure distance.
 
@@ -128,6 +130,7 @@ class RepeatPipeline:
         self._gated: tuple[int, NDArray[np.float64]] | None = None  # last frame's localization beyond the gate
         self.frames = 0
         self.failures = 0  # number of localization failures declared (entries into the failure state)
+        self.refused_places = 0  # places of the whole-map search refused as ambiguous
 
     def close(self) -> None:
         self.front.close()
@@ -228,10 +231,16 @@ class RepeatPipeline:
                     loc = self.localizer.search(features, camera, more)
                     timing["search"] = time.perf_counter() - t
                     searched = True
-                    if loc.success:
+                    if loc.success and self._unambiguous(loc):
                         localized = relocalized = True
                         self._lost = False
-                        log.info("relocalized at keyframe %d with %d inliers", loc.ref_index, loc.inliers)
+                        log.info("relocalized at keyframe %d with %d inliers (next distinct place %d)",
+                                 loc.ref_index, loc.inliers, loc.runner_up_inliers)
+                    elif loc.success:
+                        self.refused_places += 1
+                        log.info("whole-map search: keyframe %d with %d inliers refused (a distinct place has %d; "
+                                 "needs %d and %.3g times as many)", loc.ref_index, loc.inliers,
+                                 loc.runner_up_inliers, c.search_min_inliers, c.search_margin)
 
         self._gated = None
         if loc is not None and not localized and self._strong_beyond_gate(loc):
@@ -265,6 +274,12 @@ class RepeatPipeline:
             covariance=loc.covariance.copy() if (localized and loc is not None) else None,
             timing_s=timing,
         )
+
+    def _unambiguous(self, loc: Localization) -> bool:
+        """A place of the whole-map search with the evidence that rules out look-alikes: ``search_min_inliers``
+        and ``search_margin`` times the inliers of the best distinct place."""
+        c = self.config
+        return loc.inliers >= c.search_min_inliers and loc.inliers >= c.search_margin * loc.runner_up_inliers
 
     def _strong_beyond_gate(self, loc: Localization) -> bool:
         """Rejected by the prior gate only, with ``confirm_beyond_gate_inliers`` (> 0) inliers."""

@@ -93,6 +93,20 @@ class RepeatConfig(Config):
         "following localization, 45-108 inliers, fail the gate until the 20 m failure; with no inlier minimum, "
         "consecutive wrong localizations of 13 inliers in the sand of repeat07 were accepted). 0: never.", min=0,
     )
+    search_min_inliers: int = param(
+        12, description="A place found by the whole-map search is accepted only with at least this many inliers: "
+        "it is chosen among every keyframe window of the map, so a look-alike place reaches the 6 of a local "
+        "localization far more often (twice min_inliers).", min=4,
+    )
+    search_margin: float = param(
+        1.5, description="... and with at least this many times the inliers of the best place farther than "
+        "search_distinct_m along the path (a ratio test between places: a repetitive route has look-alikes).",
+        min=1.0,
+    )
+    search_distinct_m: float = param(
+        5.0, description="Places of the whole-map search this far apart along the taught path count as different "
+        "places for search_margin, m.", min=0.0,
+    )
     initial_keyframe: int = param(
         -1, description="Keyframe where the repeat starts (-1: search the whole map for the first localization).",
         min=-1,

@@ -10,7 +10,11 @@ mode. From the ground truth:
   distance it then covers until it relocalizes would be driven manually (offline the recording goes on). The frames
   flagged ``failure`` by :class:`~lightfast.vtr.repeat.RepeatResult` — from the declaration through the
   relocalizing frame, and the frames before the first localization — count as manual distance:
-  autonomy = 1 − manual distance / distance (:meth:`RepeatRun.autonomy`; over several runs :func:`overall`);
+  autonomy = 1 − manual distance / distance (:meth:`RepeatRun.autonomy`; over several runs :func:`overall`) — the
+  published score, which counts any localization as autonomy. *Strict autonomy* also counts as manual every frame
+  whose estimate is more than ``GROSS_ERROR_M`` (1 m) from the truth or missing (:meth:`RepeatRun.strict_autonomy`):
+  a robot driving on a wrong pose is not driving autonomously. *False accepts*: frames on which the whole-map search
+  accepted a place more than ``FALSE_ACCEPT_M`` (5 m) from the truth;
 * *distance on VO* (§VI-B, Fig. 7): the true distance driven since the last successful localization, per frame; its
   distribution over the traverse, weighted by distance, is the CDF "for Y % of the traverse, the robot drove less
   than X m on VO" (:func:`cdf`);
@@ -28,8 +32,11 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-#: A localization farther than this from the truth is counted as gross (m).
+#: A localization farther than this from the truth is counted as gross, and the distance driven on it as manual in
+#: the strict score (m).
 GROSS_ERROR_M = 1.0
+#: A place accepted by the whole-map search farther than this from the truth is a false accept (m).
+FALSE_ACCEPT_M = 5.0
 #: The image sources whose inliers are reported (every mode uses a subset).
 REPORTED_SOURCES = ("grey", "fv", "fr")
 
@@ -96,6 +103,25 @@ class RepeatRun:
         return 1.0 - self.manual_m / d if d > 0 else math.nan
 
     @property
+    def manual_strict_m(self) -> float:
+        """Distance in the failure state or on an estimate more than ``GROSS_ERROR_M`` off (or none)."""
+        if not self.frames:
+            return 0.0
+        err = self._col("error_m").astype(float)
+        off = ~(err <= GROSS_ERROR_M)  # NaN (no estimate) counts as off
+        return float(self._col("step_m")[self._col("failure").astype(bool) | off].sum())
+
+    @property
+    def strict_autonomy(self) -> float:
+        d = self.distance_m
+        return 1.0 - self.manual_strict_m / d if d > 0 else math.nan
+
+    @property
+    def false_accepts(self) -> int:
+        """Frames whose whole-map search accepted a place more than ``FALSE_ACCEPT_M`` from the truth."""
+        return sum(1 for f in self.frames if f.searched_map and f.localized and f.error_m > FALSE_ACCEPT_M)
+
+    @property
     def max_vo_m(self) -> float:
         return float(self._col("vo_truth_m").max()) if self.frames else math.nan
 
@@ -117,7 +143,8 @@ class RepeatRun:
             "run": self.run, "mode": self.mode, "date": self.info.get("date"), "start": self.info.get("start"),
             "weather": self.info.get("weather"), "summary": self.info.get("summary"),
             "frames": len(self.frames), "distance_m": self.distance_m, "manual_m": self.manual_m,
-            "autonomy": self.autonomy, "failures": self.failures, "max_vo_m": self.max_vo_m,
+            "autonomy": self.autonomy, "strict_autonomy": self.strict_autonomy, "manual_strict_m": self.manual_strict_m,
+            "false_accepts_over_5m": self.false_accepts, "failures": self.failures, "max_vo_m": self.max_vo_m,
             "localized_share": self.localized_share,
             "error_m_median": float(np.median(e)) if e.size else None,
             "error_m_p95": float(np.percentile(e, 95)) if e.size else None,
@@ -167,12 +194,16 @@ def json_safe(v: Any) -> Any:
 
 
 def overall(runs: Sequence[RepeatRun], mode: str) -> dict[str, Any]:
-    """Autonomy by distance over all repeats of a mode (distance-weighted), failures, worst distance on VO."""
+    """Autonomy by distance over all repeats of a mode (distance-weighted; published and strict), false accepts,
+    failures, worst distance on VO."""
     rs = [r for r in runs if r.mode == mode]
     dist = sum(r.distance_m for r in rs)
     manual = sum(r.manual_m for r in rs)
+    strict = sum(r.manual_strict_m for r in rs)
     return {"mode": mode, "runs": len(rs), "distance_m": dist, "manual_m": manual,
-            "autonomy": 1.0 - manual / dist if dist > 0 else math.nan, "failures": sum(r.failures for r in rs),
+            "autonomy": 1.0 - manual / dist if dist > 0 else math.nan,
+            "strict_autonomy": 1.0 - strict / dist if dist > 0 else math.nan, "manual_strict_m": strict,
+            "false_accepts_over_5m": sum(r.false_accepts for r in rs), "failures": sum(r.failures for r in rs),
             "max_vo_m": max((r.max_vo_m for r in rs), default=math.nan),
             "gross_localizations": sum(int(np.count_nonzero(r.errors() > GROSS_ERROR_M)) for r in rs)}
 

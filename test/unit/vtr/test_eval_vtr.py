@@ -21,13 +21,33 @@ from lightfast.sim.vtr.recordings import DriveConfig, RunSpec, generate_vtr_set
 from lightfast.sim.vtr.scene import RouteConfig
 
 
-def _frame(i: int, step: float, *, localized: bool, failure: bool = False, vo_truth: float = 0.0) -> FrameRecord:
+def _frame(i: int, step: float, *, localized: bool, failure: bool = False, vo_truth: float = 0.0,
+           error_m: float | None = None, searched: bool | None = None) -> FrameRecord:
     return FrameRecord(
         frame=i, stamp_ns=i, s_m=float(i), step_m=step, sun_elevation_deg=30.0, localized=localized, failure=failure,
-        relocalized=False, searched_map=failure, keyframe=0, inliers_grey=10, inliers_fv=5, inliers_fr=0,
-        matches_grey=20, matches_fv=10, matches_fr=0, vo_success=True, distance_on_vo_m=vo_truth,
-        vo_truth_m=vo_truth, error_m=0.05 if localized else math.nan, error_deg=0.1, ms_total=1.0,
+        relocalized=False, searched_map=failure if searched is None else searched, keyframe=0, inliers_grey=10,
+        inliers_fv=5, inliers_fr=0, matches_grey=20, matches_fv=10, matches_fr=0, vo_success=True,
+        distance_on_vo_m=vo_truth, vo_truth_m=vo_truth,
+        error_m=(0.05 if localized else math.nan) if error_m is None else error_m, error_deg=0.1, ms_total=1.0,
         ms_front_end=0.5, ms_vo=0.2, ms_localization=0.3, ms_search=0.0)
+
+
+def test_strict_autonomy_counts_driving_on_a_wrong_pose_as_manual():
+    """Issue 19: a search accepted a place 107 m off and the robot drove 30 m on it "autonomously". Strictly, a
+    stretch is manual while the estimate is more than 1 m from the truth (or missing); the published score is kept
+    beside it."""
+    frames = [_frame(0, 0.0, localized=True)]
+    frames += [_frame(1, 2.0, localized=True, searched=True, error_m=107.0)]  # a false accept of the search
+    frames += [_frame(i, 2.0, localized=True, error_m=107.0) for i in (2, 3, 4)]  # ... driven on
+    frames += [_frame(5, 2.0, localized=False, error_m=0.8)]  # on VO, within 1 m: autonomous
+    frames += [_frame(6, 2.0, localized=True, error_m=0.02)]
+    run = RepeatRun("r", "grey", {}, frames)
+    assert run.autonomy == pytest.approx(1.0) and run.manual_m == 0.0  # the published score sees nothing
+    assert run.manual_strict_m == pytest.approx(8.0) and run.strict_autonomy == pytest.approx(1.0 - 8.0 / 12.0)
+    assert run.false_accepts == 1
+    o = overall([run], "grey")
+    assert o["strict_autonomy"] == pytest.approx(run.strict_autonomy) and o["false_accepts_over_5m"] == 1
+    assert run.summary()["strict_autonomy"] == pytest.approx(run.strict_autonomy)
 
 
 def test_autonomy_counts_the_distance_driven_in_the_failure_state():
@@ -106,7 +126,7 @@ def test_eval_on_a_tiny_route(sim_dir, tmp_path):
     assert [r.autonomy for r in again] == [r.autonomy for r in runs]
     # report only: nothing evaluated, the missing mode shows as "—"
     evaluate_vtr(sim_dir, out, modes=("fused", "grey", "mcmanus"), report_only=True, on_run=seen.append)
-    assert seen == [] and "| 100 % (" in (out / "vtr_table.md").read_text()
+    assert seen == [] and "| 100 % [100 %] (" in (out / "vtr_table.md").read_text()  # strict [published]
     assert (out / "vtr_table.md").read_text().splitlines()[6].endswith("| — |")
     # another frame budget is another evaluation; here in worker processes (--jobs)
     evaluate_vtr(sim_dir, out, modes=("fused", "grey"), max_frames=6, jobs=2, on_run=seen.append)

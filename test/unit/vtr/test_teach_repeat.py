@@ -605,6 +605,41 @@ def test_whole_map_search_matches_each_keyframe_once_with_the_windows_matches(ta
         assert all(np.array_equal(a, b) for a, b in zip(out, direct, strict=True)), (ref, source)
 
 
+def _with_look_alike(teach_map, gap_m: float = 20.0):
+    """The taught route followed, ``gap_m`` further on, by a second stretch that looks exactly like it (the same
+    keyframes' landmarks): a repetitive route in its purest form."""
+    from lightfast.vtr.map_store import Edge, Keyframe, TeachMap
+
+    kfs, n = list(teach_map.keyframes), len(teach_map.keyframes)
+    jump = np.eye(4)
+    jump[2, 3] = gap_m
+    copies = [Keyframe(n + k.index, k.stamp_ns + 10**12, k.landmarks) for k in kfs]
+    edges = [*teach_map.edges, Edge(n - 1, n, jump),
+             *(Edge(n + e.parent, n + e.child, e.T_parent_child) for e in teach_map.edges)]
+    return TeachMap(tuple(kfs + copies), tuple(edges), teach_map.sources, teach_map.feature, teach_map.descriptor_dim,
+                    teach_map.P_left, teach_map.P_right, teach_map.image_size)
+
+
+def test_whole_map_search_refuses_a_place_with_a_look_alike(taught: Taught, repeat_features):
+    """Issue 19: the search accepted a place 107 m off on 6 matches. A place is accepted only with
+    search_min_inliers and search_margin times the inliers of the best place farther than search_distinct_m: on a
+    route that repeats itself the best place is refused (and the robot keeps searching), on the original route the
+    same frame relocalizes."""
+    from lightfast.vtr.visual_odometry import VoResult
+
+    features = repeat_features["teach"][12]
+    camera = StereoCamera.from_projections(P_LEFT, P_RIGHT)
+    twice = _with_look_alike(taught.teach_map)
+    for teach_map, accepted in ((taught.teach_map, True), (twice, False)):
+        rp = RepeatPipeline(teach_map, _repeat_config("fused"))
+        res = rp._localize_step(0, VoResult(np.eye(4), True, 0, 0, False, first=True), features, camera, None)
+        assert res.searched_map and res.localized == accepted, (accepted, res.inliers_per_source)
+        assert rp.refused_places == (0 if accepted else 1)
+        loc = rp.localizer.search(features, camera)
+        assert loc.success and (loc.runner_up_inliers >= loc.inliers / 1.5) == (not accepted)
+        rp.close()
+
+
 def test_repeat_step_on_images_and_mcmanus_lazy_sources(taught: Taught, scene: Scene):
     """The node-facing call (images in) in every mode; mcmanus computes F_v/F_r only when grey fails."""
     rng = np.random.default_rng(30)
