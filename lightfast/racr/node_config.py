@@ -26,6 +26,7 @@ from lightfast.racr.initialization import InitializationConfig
 from lightfast.racr.reference import ReferenceObservation, load_reference
 from lightfast.racr.scheme import SchemeConfig
 from lightfast.racr.session import RacrSession, SessionConfig
+from lightfast.racr.verification import VerificationConfig
 
 __all__ = ["RacrNodeConfig", "ReferenceLoader"]
 
@@ -36,6 +37,7 @@ _SCHEME = SchemeConfig()
 _ADJUST = AdjustmentConfig()
 _FAST = FastAlignmentConfig()
 _FINE = FineAlignmentConfig()
+_VERIFY = VerificationConfig()
 
 
 @dataclass(frozen=True)
@@ -65,6 +67,9 @@ class RacrNodeConfig(SensorInputOptions):
                                          "§3.5).")
     fast: FastAlignmentConfig = param(_FAST, read_only=True, description="Fast alignment (§3.4.2).")
     fine: FineAlignmentConfig = param(_FINE, read_only=True, description="Fine alignment (§3.4.3).")
+    verification: VerificationConfig = param(_VERIFY, read_only=True, description="Self-check of a convergence "
+                                             "against the reference image (failed or ambiguous instead of "
+                                             "converged).")
     # input ----------------------------------------------------------------------------------------------------
     keyframes_per_cloud: int = param(
         4, description="A /vse/points cloud waits for this many keyframes stamped like it (image + pose).", min=0,
@@ -91,7 +96,8 @@ class RacrNodeConfig(SensorInputOptions):
         return session_class(reference.points_m, reference.T_ref_camref, config=self.session,
                              scheme_config=self.scheme, fast_config=self.fast, fine_config=self.fine,
                              adjustment_config=self.adjustment, init_config=self.initialization, clock=clock,
-                             threaded=threaded)
+                             threaded=threaded, reference_image=reference.image,
+                             reference_camera=reference.camera, verification_config=self.verification)
 
 
 @dataclass

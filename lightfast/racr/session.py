@@ -50,6 +50,7 @@ from lightfast.racr.fast_alignment import FastAlignmentConfig, ReferenceCloud
 from lightfast.racr.fine import FineAlignmentConfig, Keyframe
 from lightfast.racr.initialization import HandEyeResult, InitializationConfig, initialize
 from lightfast.racr.scheme import RacrScheme, SchemeConfig, SchemeStatus
+from lightfast.racr.verification import ReferenceView, Verification, VerificationConfig, verify
 
 __all__ = [
     "HAND_AXES",
@@ -68,7 +69,7 @@ Array = NDArray[np.float64]
 HAND_AXES = {"x": (1.0, 0.0, 0.0), "y": (0.0, 1.0, 0.0), "z": (0.0, 0.0, 1.0)}
 #: Stages before the scheme runs; after that the stage is the scheme's (``SCHEME_STAGES``: aligning, ready,
 #: moving, converged, platform_timeout, failed).
-SESSION_STAGES = ("waiting_for_platform", "waiting_for_vse", "initializing", "initialization_failed")
+SESSION_STAGES = ("waiting_for_platform", "waiting_for_vse", "initializing", "initialization_failed", "ambiguous")
 
 
 @dataclass(frozen=True)
@@ -208,6 +209,9 @@ class RacrSession:
         init_config: InitializationConfig | None = None,
         clock: Callable[[], float] = time.monotonic,
         threaded: bool = True,
+        reference_image: ArrayLike | None = None,
+        reference_camera: PinholeCamera | None = None,
+        verification_config: VerificationConfig | None = None,
     ) -> None:
         self.config = config or SessionConfig()
         #: the scheme aligns in its own thread; False: the caller runs its jobs (``scheme.next_alignment_job``,
@@ -223,6 +227,13 @@ class RacrSession:
         self._reference = ReferenceCloud.from_config(reference_points_m, self.fast_config)
         self._clock = clock
         self._plan = initialization_motions(self.config)
+        self.verification_config = verification_config or VerificationConfig()
+        #: the reference image and its depth from the cloud, for the convergence self-check (None: no check)
+        self._view = None if reference_image is None or reference_camera is None or not \
+            self.verification_config.enabled else ReferenceView(reference_points_m, self._T_ref_camref,
+                                                                reference_image, reference_camera,
+                                                                self.verification_config)
+        self.verification: Verification | None = None
 
         self._lock = threading.RLock()
         self._vse_pose: tuple[Array, float] | None = None  # latest raw (VSE units)
@@ -341,9 +352,12 @@ class RacrSession:
         if step is None:
             return None
         if step.converged:
+            verification = self._verify()
             with self._lock:
                 self._converged = True
-            logger.info("rACR converged: g=%.3g", step.g)
+                self.verification = verification
+            logger.info("rACR converged: g=%.3g%s", step.g, "" if verification is None else
+                        f"; {verification.describe()}")
             return None
         with self._lock:
             self._motions_issued += 1
@@ -400,6 +414,20 @@ class RacrSession:
             self._hand_to_scheme(scheme, scaled)
         if self._vse_pose is not None and (obs is None or self._vse_pose[1] > obs.stamp):
             scheme.add_vse_pose(_scaled_pose(self._vse_pose[0], result.scale_m_per_vse), stamp=self._vse_pose[1])
+
+    def _verify(self) -> Verification | None:
+        """The self-check of a convergence (:mod:`lightfast.racr.verification`) on the latest observation's
+        keyframes, placed in the reference frame by the estimate; None without a reference image."""
+        with self._lock:
+            obs, scheme, s = self._observation, self._scheme, self._scale
+        if self._view is None or obs is None or scheme is None or s is None:
+            return None
+        st = scheme.status
+        if st.T_ref_cur is None or st.sigma is None:
+            return None
+        kfs = [(k.image, camera_pose_in_reference(_scaled_pose(np.array(k.T_cur_cam), s), st.T_ref_cur, st.sigma),
+                k.camera) for k in obs.keyframes]
+        return verify(self._view, kfs)
 
     def _hand_eye_result(self, result: HandEyeResult) -> HandEyeResult:
         """The initialization's result as the scheme gets it: unchanged here; a study of the method's sensitivity
@@ -471,8 +499,15 @@ class RacrSession:
         total = len(self._plan)
         done = len(self._pairs_A)
         timeout = self.scheme_config.platform_timeout_s
+        v = self.verification
+        if sst is not None and sst.stage == "converged" and v is not None and v.verdict != "verified":
+            g = "" if sst.g is None else f" (g={sst.g:.3g} after {sst.adjustments} adjustments)"
+            if v.verdict == "failed":
+                return "failed", "error", f"converged to a wrong pose{g}: {v.describe()}"
+            return "ambiguous", "warn", f"converged{g} but {v.describe()}"
         if sst is not None:
-            return self._describe_scheme(sst)
+            stage, level, message = self._describe_scheme(sst)
+            return stage, level, message if v is None or stage != "converged" else f"{message}; {v.describe()}"
         if self._init_error is not None:
             return "initialization_failed", "error", f"initialization failed (no motion will be issued): " \
                                                      f"{self._init_error}"

@@ -32,7 +32,7 @@ __all__ = ["NODE_NAME", "TERMINAL_FAILURES", "RacrRun", "pose7_to_matrix", "scor
 
 NODE_NAME = "racr_node"
 #: Stages racr_node does not leave by itself.
-TERMINAL_FAILURES = ("initialization_failed", "failed")
+TERMINAL_FAILURES = ("initialization_failed", "failed", "ambiguous")
 
 
 @dataclass(frozen=True)

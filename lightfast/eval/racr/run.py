@@ -133,7 +133,7 @@ def _initialization_details(session: _Devices, racr: RacrSession) -> dict[str, A
     }
 
 
-_ENDED = ("converged", "initialization_failed", "failed", "platform_timeout")
+_ENDED = ("converged", "ambiguous", "initialization_failed", "failed", "platform_timeout")
 
 
 def _run_racr(scene: Any, devices: _Devices, node: RacrNodeConfig, config: RacrEvalConfig,

@@ -63,7 +63,9 @@ def test_runs_are_scored_from_the_truth_and_recorded(evaluated) -> None:
     # rACR relocalizes under the night floodlight, in simulated time, from its own initialization
     for m in ("racr", "racr-serial"):
         r = by[m]
-        assert r.success and r.stop_reason in ("converged", "adjustment limit"), r
+        assert r.success and r.stop_reason.split(":")[0] in ("converged", "ambiguous", "adjustment limit"), r
+        # its own verdict: at 160x120 under the night floodlight the reference image (daylight) cannot verify it
+        assert r.reported in ("converged", "ambiguous") and r.self_reported_failure == (r.reported != "converged")
         assert r.time_init_s > 0.0 and 0.0 < r.time_loop_s < 300.0
         assert abs(r.details["scale_error_rel"]) < 0.05 and r.details["handeye_rotation_error_deg"] < 5.0
         assert r.trace[-1].afd_px < 0.2 * r.trace[0].afd_px

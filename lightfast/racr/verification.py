@@ -1,0 +1,143 @@
+"""Self-check of a converged relocalization: does the reference image agree with the estimate? (issue 19; not in
+the paper, whose rACR reports convergence whenever g ≤ η, §3.5.)
+
+The geometric alignment (§3.4) can converge to a wrong pose on a repetitive relief (sliding along a facade by its
+period), and g ≤ η then holds at the wrong place. The check uses evidence the alignment did not: SIFT matches between
+the reference image and the current VSE keyframe images (:func:`~lightfast.racr.acr_baseline.sift_matches`). Each
+reference keypoint gets a depth from the reference cloud (the nearest projected point, z-buffered, within
+``depth_radius_px``), is lifted into the reference frame and projected into the keyframe with the estimate
+(``T_ref_cam`` of the keyframe = ``T_p ⟨R_A, σ_p s t_A⟩``, Eq. 2–3). A match *agrees* when its keyframe keypoint
+lies within ``agree_px`` of that projection.
+
+Verdict (:class:`Verification`): ``verified`` with at least ``min_agreeing`` agreeing matches; ``failed`` when the
+matches instead support another camera pose — a PnP RANSAC on them (cv2.solvePnPRansac) finds at least
+``min_other_pose`` inliers at a pose that moves the reference keypoints by more than ``agree_px`` on average from
+where the estimate puts them; ``ambiguous`` otherwise (too few matches under the lighting change to tell). Inputs:
+the reference cloud (metres, reference frame), its camera and pose, the reference image; keyframes as (image in
+[0, 1], ``T_ref_cam`` in metres, camera).
+"""
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy import ndimage
+
+from lightfast.camera import PinholeCamera
+from lightfast.config import Config, param
+from lightfast.geometry import inverse
+from lightfast.racr.acr_baseline import AcrConfig, sift_matches
+
+__all__ = ["VERDICTS", "ReferenceView", "Verification", "VerificationConfig", "verify"]
+
+Array = NDArray[np.float64]
+VERDICTS = ("verified", "failed", "ambiguous")
+
+
+@dataclass(frozen=True)
+class VerificationConfig(Config):
+    """Options of the convergence self-check (module docstring)."""
+
+    enabled: bool = param(True, description="Check a convergence against the reference image before reporting it "
+                          "(failed or ambiguous instead of converged when the image disagrees or cannot tell).")
+    agree_px: float = param(4.0, description="A reference feature agrees with the estimate when it reprojects this "
+                            "close to its match in a keyframe, px (the success criterion is AFD < 3 px, plus about "
+                            "1 px of keypoint noise).", min=0.5, max=50.0)
+    min_agreeing: int = param(6, description="Agreeing matches (over all keyframes) that verify a convergence (a "
+                              "wrong match lands within agree_px of its prediction by chance with a probability "
+                              "below 1e-3: six cannot be chance).", min=3)
+    min_other_pose: int = param(12, description="PnP inliers at another camera pose that make a convergence failed "
+                                "(more than min_agreeing: RANSAC fits a few wrong matches by chance).", min=6)
+    depth_radius_px: int = param(2, description="A reference keypoint takes the depth of the nearest reference point "
+                                 "projected within this many pixels (a semi-dense cloud).", min=0, max=10)
+
+
+@dataclass(frozen=True)
+class Verification:
+    """The verdict, the matches it rests on and, for ``failed``, the mean displacement (px) between where the
+    estimate and where the images put the reference features."""
+
+    verdict: str
+    matches: int
+    agreeing: int
+    other_pose_inliers: int = 0
+    disagreement_px: float = float("nan")
+
+    def describe(self) -> str:
+        if self.verdict == "verified":
+            return f"verified by {self.agreeing} of {self.matches} reference-image matches"
+        if self.verdict == "failed":
+            return (f"the reference image disagrees: {self.other_pose_inliers} matches put the camera elsewhere "
+                    f"(features {self.disagreement_px:.1f} px from where the estimate puts them; {self.agreeing} "
+                    "agree)")
+        return f"unverified: {self.agreeing} of {self.matches} reference-image matches agree (too few to tell)"
+
+
+class ReferenceView:
+    """The reference image with a depth per pixel from the reference cloud (for lifting keypoints to 3-D)."""
+
+    def __init__(self, points_m: ArrayLike, T_ref_camref: ArrayLike, image: ArrayLike, camera: PinholeCamera,
+                 config: VerificationConfig | None = None) -> None:
+        self.config = config or VerificationConfig()
+        self.camera = camera
+        self.image = np.asarray(image)
+        self.T_ref_camref = np.asarray(T_ref_camref, dtype=np.float64)
+        pts = np.asarray(points_m, np.float64).reshape(-1, 3)
+        p_cam = (inverse(self.T_ref_camref) @ np.c_[pts, np.ones(len(pts))].T).T
+        uv, ok = camera.project(p_cam[:, :3])
+        u, v = np.rint(uv[ok, 0]).astype(np.intp), np.rint(uv[ok, 1]).astype(np.intp)
+        inside = (u >= 0) & (u < camera.width) & (v >= 0) & (v < camera.height)
+        depth = np.full(camera.shape, np.inf)
+        np.minimum.at(depth, (v[inside], u[inside]), p_cam[ok][inside, 2])
+        r = self.config.depth_radius_px
+        self.depth_m = ndimage.grey_erosion(depth, size=(2 * r + 1, 2 * r + 1)) if r > 0 else depth
+
+    def lift(self, uv_px: Array) -> tuple[Array, NDArray[np.bool_]]:
+        """Reference-frame points (n, 3) of reference pixels with a depth, and which had one."""
+        u = np.clip(np.rint(uv_px[:, 0]).astype(np.intp), 0, self.camera.width - 1)
+        v = np.clip(np.rint(uv_px[:, 1]).astype(np.intp), 0, self.camera.height - 1)
+        d = self.depth_m[v, u]
+        ok = np.isfinite(d)
+        p_cam = self.camera.backproject(uv_px[ok], d[ok])
+        return (self.T_ref_camref @ np.c_[p_cam, np.ones(len(p_cam))].T).T[:, :3], ok
+
+
+def verify(view: ReferenceView, keyframes: Sequence[tuple[ArrayLike, ArrayLike, PinholeCamera]]) -> Verification:
+    """The verdict on an estimate from keyframes ``(image in [0, 1] or uint8, T_ref_cam, camera)`` (module
+    docstring)."""
+    cfg = view.config
+    matches = agreeing = best_other = 0
+    disagreement = float("nan")
+    for image, T_ref_cam, cam in keyframes:
+        p_kf, p_ref = sift_matches(image, view.image, AcrConfig())
+        X_ref, ok = view.lift(p_ref)
+        p_kf = p_kf[ok]
+        matches += len(p_kf)
+        if len(p_kf) == 0:
+            continue
+        T_cam_ref = inverse(np.asarray(T_ref_cam, dtype=np.float64))
+        X_cam = (T_cam_ref @ np.c_[X_ref, np.ones(len(X_ref))].T).T[:, :3]
+        uv, front = cam.project(X_cam)
+        err = np.where(front, np.linalg.norm(uv - p_kf, axis=1), np.inf)
+        agreeing += int(np.count_nonzero(err <= cfg.agree_px))
+        if len(p_kf) < cfg.min_other_pose:
+            continue
+        found, rvec, tvec, inliers = cv2.solvePnPRansac(
+            X_ref.astype(np.float64), p_kf.astype(np.float64), cam.K, None, reprojectionError=cfg.agree_px,
+            iterationsCount=500, confidence=0.999, flags=cv2.SOLVEPNP_EPNP)
+        if not found or inliers is None or len(inliers) <= best_other:
+            continue
+        R, _ = cv2.Rodrigues(rvec)
+        idx = inliers.ravel()
+        uv_other = (cam.K @ (X_ref[idx] @ R.T + tvec.ravel()).T).T
+        uv_other = uv_other[:, :2] / uv_other[:, 2:3]
+        moved = float(np.mean(np.linalg.norm(uv_other - np.where(front[idx, None], uv[idx], np.inf), axis=1)))
+        best_other, disagreement = len(idx), moved
+    if agreeing >= cfg.min_agreeing:
+        return Verification("verified", matches, agreeing, best_other, disagreement)
+    if best_other >= cfg.min_other_pose and disagreement > cfg.agree_px:
+        return Verification("failed", matches, agreeing, best_other, disagreement)
+    return Verification("ambiguous", matches, agreeing, best_other, disagreement)
