@@ -35,7 +35,7 @@ import math
 import threading
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -50,7 +50,13 @@ from lightfast.racr.fast_alignment import FastAlignmentConfig, ReferenceCloud
 from lightfast.racr.fine import FineAlignmentConfig, Keyframe
 from lightfast.racr.initialization import HandEyeResult, InitializationConfig, initialize
 from lightfast.racr.scheme import RacrScheme, SchemeConfig, SchemeStatus
-from lightfast.racr.verification import ReferenceView, Verification, VerificationConfig, verify
+from lightfast.racr.verification import (
+    ReferenceView,
+    Verification,
+    VerificationConfig,
+    look_alike_distance,
+    verify,
+)
 
 __all__ = [
     "HAND_AXES",
@@ -427,7 +433,19 @@ class RacrSession:
             return None
         kfs = [(k.image, camera_pose_in_reference(_scaled_pose(np.array(k.T_cur_cam), s), st.T_ref_cur, st.sigma),
                 k.camera) for k in obs.keyframes]
-        return verify(self._view, kfs)
+        result = verify(self._view, kfs)
+        if result.verdict != "ambiguous":
+            return result
+        # the image cannot tell (a strong lighting change): is the geometric fit unique around the estimate?
+        T_ref_cam = camera_pose_in_reference(_scaled_pose(obs.T_vse_cam, s), st.T_ref_cur, st.sigma)
+        try:
+            d, ran = look_alike_distance(obs.points * s, self._reference, st.T_ref_cur, st.sigma, T_ref_cam,
+                                         self.fast_config, self.verification_config)
+        except RacrError as exc:
+            logger.info("restarts around the estimate failed: %s", exc)
+            return result
+        verdict = "ambiguous" if np.isfinite(d) or ran == 0 else "verified"
+        return replace(result, verdict=verdict, look_alike_m=d, restarts=ran)
 
     def _hand_eye_result(self, result: HandEyeResult) -> HandEyeResult:
         """The initialization's result as the scheme gets it: unchanged here; a study of the method's sensitivity

@@ -12,7 +12,10 @@ lies within ``agree_px`` of that projection.
 Verdict (:class:`Verification`): ``verified`` with at least ``min_agreeing`` agreeing matches; ``failed`` when the
 matches instead support another camera pose — a PnP RANSAC on them (cv2.solvePnPRansac) finds at least
 ``min_other_pose`` inliers at a pose that moves the reference keypoints by more than ``agree_px`` on average from
-where the estimate puts them; ``ambiguous`` otherwise (too few matches under the lighting change to tell). Inputs:
+where the estimate puts them. When the image cannot tell (too few matches under a lighting change), the geometry
+is asked instead (:func:`look_alike_distance`): the fast alignment is restarted from the estimate shifted by a few
+cm across the view; a restart that settles elsewhere with a comparable fitness is a look-alike (a repetitive relief:
+``ambiguous``), none means the fit is unique around the estimate (``verified`` by the geometry). Inputs:
 the reference cloud (metres, reference frame), its camera and pose, the reference image; keyframes as (image in
 [0, 1], ``T_ref_cam`` in metres, camera).
 """
@@ -30,8 +33,10 @@ from lightfast.camera import PinholeCamera
 from lightfast.config import Config, param
 from lightfast.geometry import inverse
 from lightfast.racr.acr_baseline import AcrConfig, sift_matches
+from lightfast.racr.errors import AlignmentError
+from lightfast.racr.fast_alignment import FastAlignmentConfig, ReferenceCloud, fast_align
 
-__all__ = ["VERDICTS", "ReferenceView", "Verification", "VerificationConfig", "verify"]
+__all__ = ["VERDICTS", "ReferenceView", "Verification", "VerificationConfig", "look_alike_distance", "verify"]
 
 Array = NDArray[np.float64]
 VERDICTS = ("verified", "failed", "ambiguous")
@@ -53,22 +58,39 @@ class VerificationConfig(Config):
                                 "(more than min_agreeing: RANSAC fits a few wrong matches by chance).", min=6)
     depth_radius_px: int = param(2, description="A reference keypoint takes the depth of the nearest reference point "
                                  "projected within this many pixels (a semi-dense cloud).", min=0, max=10)
+    basin_shifts_m: tuple[float, ...] = param(
+        (0.03, 0.06), description="When the image cannot tell (a strong lighting change): the fast alignment is "
+        "started again from the estimate shifted by these distances along the camera's x and y axes, m.")
+    basin_separation_m: float = param(0.01, description="A restart that settles this far from the estimate is "
+                                      "another fit, m.", min=0.0)
+    basin_fitness_ratio: float = param(0.9, description="... and a look-alike when its fitness is at least this "
+                                       "share of the estimate's (then the convergence is ambiguous).", min=0.0,
+                                       max=2.0)
 
 
 @dataclass(frozen=True)
 class Verification:
     """The verdict, the matches it rests on and, for ``failed``, the mean displacement (px) between where the
-    estimate and where the images put the reference features."""
+    estimate and where the images put the reference features; ``look_alike_m``: the distance to the nearest other
+    fit of comparable fitness the restarts found (NaN: none; only when the image could not tell)."""
 
     verdict: str
     matches: int
     agreeing: int
     other_pose_inliers: int = 0
     disagreement_px: float = float("nan")
+    look_alike_m: float = float("nan")
+    restarts: int = 0
 
     def describe(self) -> str:
+        if self.verdict == "verified" and self.restarts:
+            return (f"verified by the geometry: {self.restarts} restarts settle back (the reference image could not "
+                    f"tell: {self.agreeing} of {self.matches} matches agree)")
         if self.verdict == "verified":
             return f"verified by {self.agreeing} of {self.matches} reference-image matches"
+        if self.verdict == "ambiguous" and np.isfinite(self.look_alike_m):
+            return (f"a look-alike fit {100 * self.look_alike_m:.1f} cm away is as good (the reference "
+                    f"image could not tell: {self.agreeing} of {self.matches} matches agree)")
         if self.verdict == "failed":
             return (f"the reference image disagrees: {self.other_pose_inliers} matches put the camera elsewhere "
                     f"(features {self.disagreement_px:.1f} px from where the estimate puts them; {self.agreeing} "
@@ -141,3 +163,30 @@ def verify(view: ReferenceView, keyframes: Sequence[tuple[ArrayLike, ArrayLike, 
     if best_other >= cfg.min_other_pose and disagreement > cfg.agree_px:
         return Verification("failed", matches, agreeing, best_other, disagreement)
     return Verification("ambiguous", matches, agreeing, best_other, disagreement)
+
+
+def look_alike_distance(points_cur: ArrayLike, reference: ReferenceCloud, T_ref_cur: Array, sigma: float,
+                        T_ref_cam: Array, fast_config: FastAlignmentConfig,
+                        config: VerificationConfig) -> tuple[float, int]:
+    """Restart the fast alignment from the estimate shifted along the camera's x and y axes (``basin_shifts_m``):
+    the distance (m) to the nearest restart that settles elsewhere (``basin_separation_m``) with at least
+    ``basin_fitness_ratio`` of the estimate's own fitness (NaN: none), and the number of restarts that ran."""
+    here = fast_align(points_cur, reference, T_ref_cur_init=T_ref_cur, sigma_init=sigma, config=fast_config)
+    nearest, ran = float("nan"), 0
+    axes = (T_ref_cam[:3, 0], T_ref_cam[:3, 1])
+    for d in config.basin_shifts_m:
+        for axis in axes:
+            for sign in (1.0, -1.0):
+                start = np.array(T_ref_cur, dtype=np.float64)
+                start[:3, 3] += sign * d * axis
+                try:
+                    r = fast_align(points_cur, reference, T_ref_cur_init=start, sigma_init=sigma, config=fast_config)
+                except AlignmentError:
+                    continue
+                ran += 1
+                dist = float(np.linalg.norm(r.T_ref_cur[:3, 3] - here.T_ref_cur[:3, 3]))
+                if (r.converged and dist > config.basin_separation_m
+                        and r.fitness >= config.basin_fitness_ratio * here.fitness
+                        and not dist >= nearest):
+                    nearest = dist
+    return nearest, ran

@@ -17,9 +17,8 @@ their ``camera_info`` projection matrices in, :class:`RepeatResult` out):
    between them: then the prior is the wrong one (a VO step gone astray).
 5. **Failure handling** (§IV-C): without success the VO prior is the pose and the distance driven on VO alone
    accumulates; beyond ``max_distance_on_vo_m`` (20 m) it is a **localization failure**: the robot "stops" and the
-   whole map is searched (:mod:`lightfast.vtr.map_search`) every frame until it finds a place with the evidence
-   that rules out look-alikes (``search_min_inliers``, ``search_margin`` over the best distinct place; then
-   ``relocalized``). Before
+   whole map is searched (:mod:`lightfast.vtr.map_search`) every frame until a place has the evidence that rules
+   out look-alikes (``search_min_inliers``, ``search_margin``; ``relocalized``). Before
    the first localization the pipeline is in the same state ("the map is searched until the live stereo feed
    localizes"); with ``initial_keyframe`` only the window around that keyframe is tried until the failure distance.
 

@@ -28,12 +28,15 @@ def _group(runs: Sequence[RunRecord]) -> dict[tuple[str, str], list[RunRecord]]:
 
 
 def summarize(runs: Sequence[RunRecord]) -> dict[str, Any]:
-    """Per (method, lighting): counts, success rate, median/mean AFD, adjustments, times."""
+    """Per (method, lighting): counts, success rate, median/mean AFD, adjustments, times, and how often the method's
+    own verdict matched the truth's."""
     out: dict[str, Any] = {}
     for (m, lt), rs in sorted(_group(runs).items()):
         afd = np.array([r.afd_px for r in rs])
         fin = afd[np.isfinite(afd)]
         conv = [r for r in rs if r.converged]
+        failed = [r for r in rs if not r.success]
+        succeeded = [r for r in rs if r.success]
         out[f"{m}/{lt}"] = {
             "method": m, "lighting": lt, "runs": len(rs), "scenes": len({r.scene for r in rs}),
             "success_rate": float(np.mean([r.success for r in rs])),
@@ -41,6 +44,13 @@ def summarize(runs: Sequence[RunRecord]) -> dict[str, Any]:
             "afd_mean_px": float(np.mean(fin)) if len(fin) else math.inf,
             "afd_std_px": float(np.std(fin)) if len(fin) else math.nan,
             "converged_rate": len(conv) / len(rs),
+            # the method's own verdict against the truth's: failures it reported (failed, ambiguous, …) and
+            # successes it did not claim
+            "self_reported_failure_rate": (sum(r.self_reported_failure for r in failed) / len(failed) if failed
+                                           else math.nan),
+            "unclaimed_success_rate": (sum(r.self_reported_failure for r in succeeded) / len(succeeded)
+                                       if succeeded else math.nan),
+            "reported": {v: sum(r.reported == v for r in rs) for v in sorted({r.reported for r in rs})},
             "adjustments_mean": float(np.mean([r.adjustments for r in rs])),
             "time_loop_mean_s": float(np.mean([r.time_loop_s for r in rs])),
             "time_loop_std_s": float(np.std([r.time_loop_s for r in rs])),

@@ -48,3 +48,36 @@ def test_too_little_evidence_is_ambiguous(scene) -> None:
     flat = np.full_like(img, 0.5)
     result = verify(view, [(flat, T, scene.camera)])
     assert result.verdict == "ambiguous" and result.agreeing < 6 and "unverified" in result.describe()
+
+
+def _relief(kind: str, rng: np.random.Generator, n: int = 6000) -> np.ndarray:
+    """Points of a 40 cm × 30 cm wall 1 m in front of the camera (z forward): a corrugation of period 4 cm along x
+    (repetitive: it looks the same every 4 cm) or a few random bumps (unique)."""
+    x, y = rng.uniform(-0.2, 0.2, n), rng.uniform(-0.15, 0.15, n)
+    if kind == "corrugated":
+        z = 1.0 + 0.008 * np.sin(2 * np.pi * x / 0.04)
+    else:
+        c = rng.uniform([-0.2, -0.15], [0.2, 0.15], (6, 2))
+        z = 1.0 + sum(0.02 * np.exp(-((x - cx) ** 2 + (y - cy) ** 2) / 0.003) for cx, cy in c)
+    return np.c_[x, y, z]
+
+
+def test_restarts_find_the_look_alike_of_a_repetitive_relief() -> None:
+    """When the image cannot tell, the geometry is asked: on a corrugated wall the fast alignment restarted a few
+    cm away settles one period over with the same fitness (ambiguous); on a bumpy wall it comes back (unique)."""
+    from lightfast.racr.fast_alignment import FastAlignmentConfig, ReferenceCloud
+    from lightfast.racr.verification import look_alike_distance
+
+    rng = np.random.default_rng(7)
+    cfg = VerificationConfig()
+    fast = FastAlignmentConfig(estimate_scale=False)
+    for kind, repetitive in (("corrugated", True), ("bumpy", False)):
+        ref_pts = _relief(kind, rng)
+        cur = ref_pts[rng.choice(len(ref_pts), 3000, replace=False)] + rng.normal(0, 0.0005, (3000, 3))
+        d, ran = look_alike_distance(cur, ReferenceCloud.from_config(ref_pts, fast), np.eye(4), 1.0, np.eye(4), fast,
+                                     cfg)
+        assert ran > 0
+        if repetitive:
+            assert np.isfinite(d) and abs(d - 0.04) < 0.01, d
+        else:
+            assert np.isnan(d), d
