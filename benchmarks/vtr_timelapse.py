@@ -1,37 +1,31 @@
-"""Real time-lapse check of the colour-constant images (paper §IV-A, Fig. 2(c, d); images of §III Eq. 6–7, 11–12).
+"""Colour-constant images on real fixed-camera time-lapses, with held-out weights (paper §IV-A, Fig. 2(c, d); images
+of §III Eq. 6–7, 10–12).
 
-Data: ``/work/shared/data/webcam_timelapse`` (TILDE "Webcam" / AMOS, see its PROVENANCE.md): two fixed outdoor
-webcams, ``courbevoie`` (50 images) and ``chamonix`` (40 images), across days, seasons and times of day. The
-camera does not move (measured: the median displacement of matched greyscale features between dates is 0 px), so a
-correct match lies at the same pixel. The images are read in place; nothing is copied.
+Data: ``--data DIR`` (default ``$LIGHTFAST_SHARED/data/webcam_timelapse``, else ``../shared/data/webcam_timelapse``
+beside the repository), read in place. Every sub-folder with at least two images is a sequence of one fixed camera
+(``--sequences`` picks some); a file name starting ``YYYYMMDD_HHMMSS`` gives the capture time (taken as UTC). The
+site of a sequence (for the sun elevation of each image) comes from ``SEQUENCE/site.yaml``
+(:meth:`lightfast.daylight.sun.Site.from_yaml`) if present, else from ``--site NAME=LAT,LON[,ALT]``; without one
+the sun-elevation table leaves that sequence out and says so.
 
-Protocol, per sequence and feature type:
+Protocol, per sequence: every pair of images; per image source (greyscale, F_v, F_r, the constrained peak image:
+:func:`lightfast.vtr.image_sources`) ``--max-features`` features (:class:`lightfast.vtr.FeatureExtractor`, ORB by
+default) matched over the whole image (:func:`lightfast.vtr.calibration.fixed_camera_matches`: nearest neighbour,
+ratio 0.8, mutual); a match is correct when both keypoints lie within ``--tolerance`` px (fixed camera). Reported
+per source: correct matches per pair and precision (correct / all matches). Fused (grey ∪ F_v ∪ F_r, matches found
+by several sources counted once) holds every correct greyscale match by construction, so it is reported against
+greyscale: the share of pairs it rescues (grey < 6 correct, fused ≥ 6: the paper's inlier minimum), the share that
+falls below 6 (zero by construction: a check), and the wrong matches it adds (fused's wrong − grey's wrong, over
+fused's matches), which a localizer's outlier rejection has to remove. Lighting change Δ of a pair: median |log Y_q
+− log Y_r − median(log Y_q − log Y_r)| on 4× downsampled greyscale (the exposure change removed).
 
-* image sources (:func:`lightfast.vtr.image_sources`): greyscale (Rec. 601 luma), F_v, F_r and the constrained
-  peak image (460/530/615 nm), 8-bit mapping ``fixed`` (default) and, for comparison, ``percentile``;
-* features (:class:`lightfast.vtr.FeatureExtractor`, default options: 1000 per image, none within 4 px of a
-  zero/saturated pixel in the colour-constant sources), ORB (the default) and SIFT;
-* pairs: by default every pair of images within a sequence (2005 pairs; each image is a "reference" for the
-  others, which avoids picking one arbitrary daytime reference — a single midday reference of ``courbevoie`` turned
-  out to be a market day whose stalls change the scene); ``--references N`` instead matches every image against
-  the N images of highest sun elevation ("daytime"). Per pair and source the features are matched over the whole
-  image (:func:`lightfast.vtr.match_descriptors`: nearest neighbour, Lowe ratio 0.8, mutual) — no spatial prior,
-  so the count measures how distinctive the features stay across the lighting change;
-* a match is **correct** when its two keypoints lie within ``--tolerance`` px (default 4) of each other;
-* **fused** = union of the correct matches of greyscale, F_v and F_r (the three sources of paper Fig. 4), with
-  matches found by several sources counted once (both keypoints on the same 2-px grid cell);
-* lighting change of a pair: Δ = median over pixels of |log Y_q − log Y_r − median(log Y_q − log Y_r)| on 4×
-  downsampled greyscale (pixels dark or saturated in either image excluded): the typical change of local log
-  brightness once the global exposure change is removed (shadows moving, sun vs overcast, night lights). Pairs are
-  binned by the quartiles of Δ; a second table bins them by the sun elevation of the query image, computed with
-  :func:`lightfast.daylight.sun.sun_position` assuming the file-name times are UTC (PROVENANCE says AMOS times
-  are normally UTC, unverified; the night images at 02:57 and dusk at 18:57 fit UTC).
+Held out: with two or more sequences, ``lightfast vtr calibrate``'s fit (:func:`lightfast.vtr.calibration.calibrate`,
+β by ``--rule``) runs on each sequence alone, and its weights are scored on each *other* sequence next to the
+printed F_v/F_r. Output: ``--output`` (default ``benchmarks/results/vtr_timelapse.md``) with ``.json`` (per-pair
+counts, fits) and ``.png`` beside it, written atomically; ``--report-only`` re-renders from the ``.json``.
 
-Output: a markdown report (printed and written atomically to ``--output``, default
-``benchmarks/results/vtr_timelapse.md``), the per-pair numbers as ``.json`` beside it and a ``.png`` plot.
-
-Usage: ``nice -n 10 .venv/bin/python benchmarks/vtr_timelapse.py [--features orb,sift] [--references N]``
-(about 13 min for the defaults on the shared 2-core machine; ``--report-only`` re-renders from the .json).
+Usage: ``nice -n 10 .venv/bin/python benchmarks/vtr_timelapse.py [--data DIR] [--site NAME=LAT,LON[,ALT] ...]``
+(the shipped webcams: about 10 min on the shared 2-core machine, 6 of them calibrating; ``--no-calibration`` skips).
 """
 from __future__ import annotations
 
@@ -42,181 +36,207 @@ import json
 import logging
 import os
 import platform
-import tempfile
+import re
+import sys
 import time
-from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
 from numpy.typing import NDArray
 
 from lightfast.daylight.sun import Site, sun_position
-from lightfast.vtr import (
-    ColorConstantConfig,
-    FeatureExtractor,
-    Features,
-    StereoConfig,
-    image_sources,
-    match_descriptors,
+from lightfast.errors import LightfastError
+from lightfast.io import write_bytes_atomic, write_text_atomic
+from lightfast.vtr import ColorConstantConfig, FeatureExtractor, Features, StereoConfig, image_sources
+from lightfast.vtr.calibration import (
+    RULES,
+    CalibrationConfig,
+    CalibrationResult,
+    calibrate,
+    fixed_camera_matches,
+    load_timelapse,
 )
+from lightfast.vtr.color_constant import color_constant, to_uint8
 
 log = logging.getLogger("vtr_timelapse")
 
-DATA = Path("/work/shared/data/webcam_timelapse")
-RESULTS = Path(__file__).resolve().parent / "results"
+ROOT = Path(__file__).resolve().parents[1]
 SOURCES = ("grey", "fv", "fr", "peak")
-FUSED = ("grey", "fv", "fr")
 LABEL = {"grey": "grey", "fv": "F_v", "fr": "F_r", "peak": "peak", "fused": "fused"}
-#: Approximate sites of the webcams (named by the dataset; used only for the sun elevation of each image).
-SITES = {
-    "courbevoie": Site(latitude_deg=48.897, longitude_deg=2.253, altitude_m=40.0),
-    "chamonix": Site(latitude_deg=45.924, longitude_deg=6.870, altitude_m=1035.0),
-}
-MIN_INLIERS = 6  # paper §IV-C: localization succeeds with >= 6 matches after outlier rejection
+MIN_INLIERS = 6  # paper §IV-C: localization needs >= 6 matches after outlier rejection
+_TIME = re.compile(r"^(\d{8}_\d{6})")
+
+
+def default_data() -> Path:
+    shared = os.environ.get("LIGHTFAST_SHARED")
+    return (Path(shared) if shared else ROOT.parent / "shared") / "data" / "webcam_timelapse"
+
+
+def shown(path: str | Path) -> str:
+    """A path as the report shows it: relative to the repository (no machine path in committed files)."""
+    try:
+        return os.path.relpath(Path(path).resolve(), ROOT)
+    except ValueError:
+        return Path(path).name
+
+
+def label(key: str) -> str:
+    return f"F_fit({key[4:]})" if key.startswith("fit:") else LABEL.get(key, key)
 
 
 @dataclass
-class Frame:
+class TimeLapse:
     name: str
-    time_utc: dt.datetime
-    sun_elevation_deg: float
-    rgb: NDArray[np.uint8]
-    grey_small: NDArray[np.float32]
+    names: list[str]
+    times: list[dt.datetime | None]
+    rgb: list[NDArray[np.uint8]]
+    grey_small: list[NDArray[np.float32]]
+    site: Site | None
+    site_from: str
 
 
-def load_sequence(folder: Path, site: Site) -> list[Frame]:
-    frames = []
-    for path in sorted(folder.glob("*.png")):
-        bgr = cv2.imread(str(path), cv2.IMREAD_COLOR)
-        if bgr is None:
-            raise RuntimeError(f"cannot read {path}")
-        rgb = cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
-        when = dt.datetime.strptime(path.stem[:15], "%Y%m%d_%H%M%S").replace(tzinfo=dt.UTC)
-        grey = cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY)
-        small = cv2.resize(grey, (grey.shape[1] // 4, grey.shape[0] // 4), interpolation=cv2.INTER_AREA)
-        frames.append(
-            Frame(path.stem, when, float(sun_position(site, when).elevation_deg), rgb, small.astype(np.float32))
-        )
-    return frames
+def parse_site(text: str) -> tuple[str, Site]:
+    try:
+        name, rest = text.split("=", 1)
+        vals = [float(v) for v in rest.split(",")]
+        if len(vals) not in (2, 3) or not name:
+            raise ValueError
+        return name, Site(latitude_deg=vals[0], longitude_deg=vals[1], altitude_m=vals[2] if len(vals) == 3 else 0.0)
+    except (ValueError, LightfastError) as exc:
+        raise argparse.ArgumentTypeError(f"expected NAME=LAT,LON[,ALT] (degrees, metres), got {text!r} "
+                                         f"{exc}".rstrip()) from None
 
 
-def lighting_change(a: NDArray[np.float32], b: NDArray[np.float32]) -> tuple[float, float]:
-    """(local Δ, global exposure change) in natural-log units, see the module docstring."""
+def load_sequences(data: Path, only: list[str], site_options: dict[str, Site]) -> tuple[list[TimeLapse], list[str]]:
+    if not data.is_dir():
+        raise SystemExit(f"vtr_timelapse: no data folder {data} (set --data or LIGHTFAST_SHARED)")
+    notes: list[str] = []
+    folders = sorted(p for p in data.iterdir() if p.is_dir() and (not only or p.name in only))
+    missing = sorted(set(only) - {p.name for p in folders})
+    if missing:
+        raise SystemExit(f"vtr_timelapse: no sequence folder {', '.join(missing)} in {data}")
+    unknown = sorted(set(site_options) - {p.name for p in folders})
+    if unknown:
+        raise SystemExit(f"vtr_timelapse: --site for {', '.join(unknown)}, which is not a sequence of {data}")
+    seqs = []
+    for folder in folders:
+        try:
+            paths, rgb = load_timelapse(folder)
+        except LightfastError as exc:
+            notes.append(f"`{folder.name}` left out: " + str(exc).replace(f"{folder}: ", "").replace(str(folder), "it"))
+            continue
+        times = []
+        for p in paths:
+            m = _TIME.match(p.stem)
+            times.append(dt.datetime.strptime(m.group(1), "%Y%m%d_%H%M%S").replace(tzinfo=dt.UTC) if m else None)
+        site, site_from = None, "none"
+        if (folder / "site.yaml").is_file():
+            site, site_from = Site.from_yaml(folder / "site.yaml"), f"`{folder.name}/site.yaml`"
+            if folder.name in site_options:
+                log.warning("%s: site.yaml found; --site %s ignored", folder.name, folder.name)
+        elif folder.name in site_options:
+            site, site_from = site_options[folder.name], "`--site`"
+        small = [cv2.resize(g, (g.shape[1] // 4, g.shape[0] // 4), interpolation=cv2.INTER_AREA).astype(np.float32)
+                 for g in (cv2.cvtColor(im, cv2.COLOR_RGB2GRAY) for im in rgb)]
+        seqs.append(TimeLapse(folder.name, [p.stem for p in paths], times, rgb, small, site, site_from))
+    if not seqs:
+        raise SystemExit(f"vtr_timelapse: no sequence with at least 2 images in {data}")
+    return seqs, notes
+
+
+def lighting_change(a: NDArray[np.float32], b: NDArray[np.float32]) -> float:
     ok = (a >= 3) & (a <= 250) & (b >= 3) & (b <= 250)
     if ok.sum() < 100:
-        return float("nan"), float("nan")
+        return float("nan")
     r = np.log(b[ok]) - np.log(a[ok])
-    m = float(np.median(r))
-    return float(np.median(np.abs(r - m))), abs(m)
+    return float(np.median(np.abs(r - np.median(r))))
 
 
-def extract(
-    frames: Sequence[Frame], extractor: FeatureExtractor, color: ColorConstantConfig, sources: Sequence[str]
-) -> tuple[list[dict[str, Features]], dict[str, list[float]]]:
-    feats: list[dict[str, Features]] = []
-    seconds: dict[str, list[float]] = {s: [] for s in sources}
-    for f in frames:
-        srcs = image_sources(f.rgb, color, tuple(sources))
-        per: dict[str, Features] = {}
-        for name, src in srcs.items():
-            t0 = time.perf_counter()
-            per[name] = extractor.detect(src.image, src.valid)
-            seconds[name].append(time.perf_counter() - t0)
-        feats.append(per)
-    return feats, seconds
-
-
-def _cell_codes(uv_a: NDArray[np.float32], uv_b: NDArray[np.float32]) -> NDArray[np.int64]:
+def _codes(uv_a: NDArray[np.float32], uv_b: NDArray[np.float32]) -> NDArray[np.int64]:
     """One integer per match: both keypoints on a 2-px grid (images narrower than 8192 px)."""
     cells = np.clip(np.rint(np.concatenate([uv_a, uv_b], axis=1) / 2.0).astype(np.int64), 0, 4095)
     return ((cells[:, 0] * 4096 + cells[:, 1]) * 4096 + cells[:, 2]) * 4096 + cells[:, 3]
 
 
-def _fused_count(grey: tuple[NDArray, NDArray], others: list[tuple[NDArray, NDArray]]) -> int:
-    """Greyscale matches plus the colour-constant matches that no greyscale (or earlier) match already covers."""
-    grey_codes = _cell_codes(*grey)
-    other = np.unique(np.concatenate([_cell_codes(*o) for o in others])) if others else np.zeros(0, np.int64)
-    return len(grey_codes) + int(np.count_nonzero(~np.isin(other, grey_codes)))
+def _union(base: tuple[NDArray, NDArray], others: list[tuple[NDArray, NDArray]]) -> int:
+    """Matches of ``base`` plus those of ``others`` on a 2-px cell that no ``base`` (or earlier) match covers."""
+    codes = _codes(*base)
+    extra = np.unique(np.concatenate([_codes(*o) for o in others]))
+    return len(codes) + int(np.count_nonzero(~np.isin(extra, codes)))
 
 
-def match_pair(
-    ref: dict[str, Features], query: dict[str, Features], kind: str, tolerance: float
-) -> dict[str, dict[str, int]]:
-    out: dict[str, dict[str, int]] = {}
-    fused_all: dict[str, tuple[NDArray, NDArray]] = {}
-    fused_ok: dict[str, tuple[NDArray, NDArray]] = {}
+def source_features(seq: TimeLapse, fits: dict[str, CalibrationResult], extractor: FeatureExtractor,
+                    color: ColorConstantConfig) -> tuple[list[dict[str, Features]], dict[str, float]]:
+    feats: list[dict[str, Features]] = [{} for _ in seq.rgb]
+    ms: dict[str, list[float]] = {}
+    for k, rgb in enumerate(seq.rgb):
+        images = {n: (s.image, s.valid) for n, s in image_sources(rgb, color, SOURCES).items()}
+        for train, fit in fits.items():
+            cc = color_constant(rgb, fit.alpha, fit.beta, color)
+            images[f"fit:{train}"] = (to_uint8(cc, color), cc.valid)
+        for name, (img, valid) in images.items():
+            t0 = time.perf_counter()
+            feats[k][name] = extractor.detect(img, valid)
+            ms.setdefault(name, []).append(1000 * (time.perf_counter() - t0))
+    return feats, {k: float(np.median(v)) for k, v in ms.items()}
+
+
+def match_pair(ref: dict[str, Features], qry: dict[str, Features], tol: float) -> dict[str, list[int]]:
+    """[matches, correct] per source and per union: ``fused`` (grey ∪ F_v ∪ F_r) and ``grey+S`` for every other S."""
+    allm: dict[str, tuple[NDArray, NDArray]] = {}
+    okm: dict[str, tuple[NDArray, NDArray]] = {}
+    out: dict[str, list[int]] = {}
     for name in ref:
-        a, b = ref[name], query[name]
-        i, j, _ = match_descriptors(a.descriptors, b.descriptors, kind, ratio=0.8, mutual=True)
-        ua, ub = a.uv[i], b.uv[j]
-        correct = np.linalg.norm(ua - ub, axis=1) <= tolerance
-        out[name] = {"matches": len(i), "correct": int(correct.sum()), "features": len(b)}
-        if name in FUSED:
-            fused_all[name] = (ua, ub)
-            fused_ok[name] = (ua[correct], ub[correct])
-    if all(s in ref for s in FUSED):
-        cc = [s for s in FUSED if s != "grey"]
-        out["fused"] = {
-            "matches": _fused_count(fused_all["grey"], [fused_all[s] for s in cc]),
-            "correct": _fused_count(fused_ok["grey"], [fused_ok[s] for s in cc]),
-            "features": sum(out[s]["features"] for s in FUSED),
-        }
+        ua, ub, ok = fixed_camera_matches(ref[name], qry[name], tolerance_px=tol)
+        allm[name], okm[name] = (ua, ub), (ua[ok], ub[ok])
+        out[name] = [len(ok), int(ok.sum())]
+    unions = {"fused": ["fv", "fr"], **{f"grey+{s}": [s] for s in ref if s != "grey"}}
+    for key, parts in unions.items():
+        out[key] = [_union(allm["grey"], [allm[s] for s in parts]), _union(okm["grey"], [okm[s] for s in parts])]
     return out
 
 
-def run(args: argparse.Namespace) -> dict:
-    sequences = [s for s in args.sequences.split(",") if s]
-    features = [f for f in args.features.split(",") if f]
-    norms = [n for n in args.normalizations.split(",") if n]
-    data: dict = {"settings": {k: str(v) if isinstance(v, Path) else v for k, v in vars(args).items()},
-                  "pairs": [], "timing_ms": {}, "images": {}}
-    for seq in sequences:
-        frames = load_sequence(args.data / seq, SITES[seq])
-        n = len(frames)
-        if args.references > 0:
-            order = np.argsort([-f.sun_elevation_deg for f in frames], kind="stable")
-            refs = sorted(int(k) for k in order[: args.references])
-            pair_list = [(r, q) for r in refs for q in range(n) if q != r]
-        else:
-            refs = list(range(n))
-            pair_list = [(r, q) for r in range(n) for q in range(r + 1, n)]
-        data["images"][seq] = [
-            {"name": f.name, "time_utc": f.time_utc.isoformat(), "sun_elevation_deg": round(f.sun_elevation_deg, 2),
-             "reference": k in refs}
-            for k, f in enumerate(frames)
-        ]
-        change = {(r, q): lighting_change(frames[r].grey_small, frames[q].grey_small) for r, q in pair_list}
-        for feature in features:
-            extractor = FeatureExtractor(StereoConfig(feature=feature, max_features=args.max_features))
-            for norm in norms:
-                sources = SOURCES if norm == norms[0] else tuple(s for s in SOURCES if s != "grey")
-                color = ColorConstantConfig(normalization=norm)
-                log.info("%s: %s features, %s mapping, %d images", seq, feature, norm, len(frames))
-                feats, seconds = extract(frames, extractor, color, sources)
-                for s, secs in seconds.items():
-                    data["timing_ms"].setdefault(f"{feature}/{norm}/{s}", []).extend(1000.0 * np.asarray(secs))
-                if norm != norms[0]:  # greyscale does not depend on the mapping: reuse it
-                    grey_feats = data.setdefault("_grey", {})[(seq, feature)]
-                    for per, g in zip(feats, grey_feats, strict=True):
-                        per["grey"] = g
-                else:
-                    data.setdefault("_grey", {})[(seq, feature)] = [per["grey"] for per in feats]
-                for (r, q), (delta, glob) in change.items():
-                    counts = match_pair(feats[r], feats[q], feature, args.tolerance)
-                    data["pairs"].append({
-                        "sequence": seq, "feature": feature, "normalization": norm,
-                        "reference": frames[r].name, "query": frames[q].name,
-                        "sun_elevation_reference_deg": round(frames[r].sun_elevation_deg, 2),
-                        "sun_elevation_query_deg": round(frames[q].sun_elevation_deg, 2),
-                        "sun_elevation_min_deg": round(min(frames[r].sun_elevation_deg,
-                                                           frames[q].sun_elevation_deg), 2),
-                        "delta_local": round(delta, 4), "delta_global": round(glob, 4), "counts": counts,
-                    })
-    data.pop("_grey", None)
-    data["timing_ms"] = {k: {"median": float(np.median(v)), "mean": float(np.mean(v)), "n": len(v)}
-                         for k, v in data["timing_ms"].items()}
+def run(args: argparse.Namespace) -> dict[str, Any]:
+    sites = dict(args.site or [])
+    seqs, notes = load_sequences(args.data, [s for s in args.sequences.split(",") if s], sites)
+    stereo = StereoConfig(feature=args.feature, max_features=args.max_features)
+    color = ColorConstantConfig(normalization=args.normalization)
+    extractor = FeatureExtractor(stereo)
+    fits: dict[str, CalibrationResult] = {}
+    if args.no_calibration:
+        notes.append("Calibration not run (`--no-calibration`).")
+    elif len(seqs) < 2:
+        notes.append("Calibration not run: held-out weights need a second sequence to test on.")
+    else:
+        cal = CalibrationConfig(rule=args.rule, max_pairs=args.calibration_pairs, tolerance_px=args.tolerance)
+        for seq in seqs:
+            log.info("calibrating on %s (%d images)", seq.name, len(seq.rgb))
+            fits[seq.name] = calibrate(seq.rgb, cal, stereo=stereo, color=color, source=seq.name)
+    data: dict[str, Any] = {"sequences": {}, "fits": {k: v.to_dict() for k, v in fits.items()}, "pairs": [],
+                            "timing_ms": {}, "notes": notes}
+    for seq in seqs:
+        held_out = {k: v for k, v in fits.items() if k != seq.name}
+        log.info("%s: features of %d images (%s)", seq.name, len(seq.rgb), ", ".join([*SOURCES, *held_out]))
+        feats, ms = source_features(seq, held_out, extractor, color)
+        data["timing_ms"][seq.name] = ms
+        elev = [float(sun_position(seq.site, t).elevation_deg) if seq.site and t else None for t in seq.times]
+        known = [t for t in seq.times if t]
+        data["sequences"][seq.name] = {
+            "images": len(seq.rgb), "size": f"{seq.rgb[0].shape[1]}×{seq.rgb[0].shape[0]}",
+            "first": min(known).date().isoformat() if known else None,
+            "last": max(known).date().isoformat() if known else None, "timed": len(known),
+            "site": seq.site.to_dict() if seq.site else None, "site_from": seq.site_from,
+            "names": seq.names, "sun_elevation_deg": [None if e is None else round(e, 2) for e in elev]}
+        for r in range(len(seq.rgb)):
+            for q in range(r + 1, len(seq.rgb)):
+                er, eq = elev[r], elev[q]
+                sun = None if er is None or eq is None else round(min(er, eq), 2)
+                data["pairs"].append({"sequence": seq.name, "ref": r, "query": q, "sun_min": sun,
+                                      "delta": round(lighting_change(seq.grey_small[r], seq.grey_small[q]), 4),
+                                      "counts": match_pair(feats[r], feats[q], args.tolerance)})
     return data
 
 
@@ -224,69 +244,193 @@ def run(args: argparse.Namespace) -> dict:
 # Report
 
 
-def _bins_delta(pairs: list[dict]) -> tuple[list[tuple[str, float, float]], NDArray[np.float64]]:
-    deltas = np.array([p["delta_local"] for p in pairs])
-    edges = np.nanquantile(deltas, [0.0, 0.25, 0.5, 0.75, 1.0])
+def _num(x: float, digits: int = 1) -> str:
+    return "–" if not np.isfinite(x) else f"{x:.{digits}f}"
+
+
+def _pct(x: float) -> str:
+    return "–" if not np.isfinite(x) else f"{100 * x:.0f} %"
+
+
+def _stats(group: list[dict], key: str) -> dict[str, float]:
+    """Mean correct per pair, precision, share of pairs below MIN_INLIERS; against grey for unions."""
+    c = np.array([p["counts"][key][1] for p in group], float)
+    m = np.array([p["counts"][key][0] for p in group], float)
+    g = np.array([p["counts"]["grey"][1] for p in group], float)
+    gm = np.array([p["counts"]["grey"][0] for p in group], float)
+    n = len(group) if group else float("nan")
+    wrong_added = ((m - c).sum() - (gm - g).sum()) / m.sum() if m.sum() else float("nan")
+    return {"correct": c.sum() / n, "precision": c.sum() / m.sum() if m.sum() else float("nan"),
+            "below": float(np.mean(c < MIN_INLIERS)) if len(group) else float("nan"),
+            "rescued": float(np.mean((g < MIN_INLIERS) & (c >= MIN_INLIERS))) if len(group) else float("nan"),
+            "fell": float(np.mean((g >= MIN_INLIERS) & (c < MIN_INLIERS))) if len(group) else float("nan"),
+            "gain": (c - g).sum() / n, "wrong_added": wrong_added}
+
+
+def _bins(pairs: list[dict]) -> list[tuple[str, list[dict]]]:
+    d = np.array([p["delta"] for p in pairs], float)
+    edges = np.nanquantile(d, [0, 0.25, 0.5, 0.75, 1.0])
     names = ["Q1 (smallest)", "Q2", "Q3", "Q4 (largest)"]
-    return [(names[k], edges[k], edges[k + 1]) for k in range(4)], edges
+    return [(f"Δ {names[k]} [{edges[k]:.2f}, {edges[k + 1]:.2f}]",
+             [p for p in pairs if edges[k] <= p["delta"] < edges[k + 1] or (k == 3 and p["delta"] == edges[4])])
+            for k in range(4)]
 
 
-def _in(p: dict, lo: float, hi: float, key: str, last: bool) -> bool:
-    v = p[key]
-    return lo <= v < hi or (last and v == hi)
+def _groups(pairs: list[dict], seqs: list[str]) -> list[tuple[str, list[dict]]]:
+    return [*_bins(pairs), ("all pairs", pairs), *[(f"all `{s}`", [p for p in pairs if p["sequence"] == s])
+                                                   for s in seqs]]
 
 
-def _row(label: str, group: list[dict], cols: Sequence[str]) -> str:
-    n = len(group)
-    cells = [label, str(n)]
-    means = {}
-    for c in cols:
-        correct = np.array([p["counts"][c]["correct"] for p in group], float)
-        matches = np.array([p["counts"][c]["matches"] for p in group], float)
-        means[c] = correct.mean() if n else float("nan")
-        prec = correct.sum() / matches.sum() if matches.sum() else float("nan")
-        below = np.mean(correct < MIN_INLIERS) if n else float("nan")
-        cells.append(f"{means[c]:.1f} ({100 * prec:.0f} %, {100 * below:.0f} %)")
-    if "fused" in cols:
-        g = np.array([p["counts"]["grey"]["correct"] for p in group], float)
-        fz = np.array([p["counts"]["fused"]["correct"] for p in group], float)
-        cells.append(f"{fz.mean() / max(g.mean(), 1e-9):.2f}")
-        cells.append(f"{np.mean(fz >= g + 1):.0%}")
-        cells.append(f"{np.mean(fz - g):.1f}")
-    return "| " + " | ".join(cells) + " |"
-
-
-def tables(data: dict) -> list[str]:
-    lines: list[str] = []
-    cols = (*SOURCES, "fused")
-    head = ("| {bin} | pairs | " + " | ".join(LABEL[c] for c in cols)
-            + " | fused / grey | pairs fused > grey | fused − grey |")
-    sep = "|---|---:|" + "---:|" * (len(cols) + 3)
-    combos = sorted({(p["feature"], p["normalization"]) for p in data["pairs"]},
-                    key=lambda x: (x[0] != "orb", x[1] != "fixed", x))
-    for feature, norm in combos:
-        pairs = [p for p in data["pairs"] if p["feature"] == feature and p["normalization"] == norm]
-        bins, _ = _bins_delta(pairs)
-        lines += [f"### {feature.upper()}, {norm} 8-bit mapping", "",
-                  "By lighting change Δ (quartiles over all pairs of both sequences):", "",
-                  head.format(bin="Δ bin [range]"), sep]
-        for k, (name, lo, hi) in enumerate(bins):
-            group = [p for p in pairs if _in(p, lo, hi, "delta_local", k == 3)]
-            lines.append(_row(f"{name} [{lo:.2f}, {hi:.2f}]", group, cols))
-        lines.append(_row("all", pairs, cols))
-        lines += ["", "By the lower sun elevation of the two images (file times taken as UTC):", "",
-                  head.format(bin="lower sun elevation"), sep]
-        for lo, hi, name in ((-90, 5, "< 5° (night, twilight)"), (5, 20, "5–20°"), (20, 40, "20–40°"),
-                             (40, 91, "≥ 40°")):
-            group = [p for p in pairs if lo <= p["sun_elevation_min_deg"] < hi]
-            lines.append(_row(name, group, cols))
-        for seq in sorted({p["sequence"] for p in pairs}):
-            lines.append(_row(f"all {seq}", [p for p in pairs if p["sequence"] == seq], cols))
-        lines.append("")
+def _source_table(groups: list[tuple[str, list[dict]]], keys: list[str]) -> list[str]:
+    lines = ["| pairs | n | " + " | ".join(label(k) for k in keys) + " |", "|---|---:|" + "---:|" * len(keys)]
+    for name, g in groups:
+        cells = [f"{_num((s := _stats(g, k))['correct'])} ({_pct(s['precision'])}; {_pct(s['below'])})" for k in keys]
+        lines.append(f"| {name} | {len(g)} | " + " | ".join(cells) + " |")
     return lines
 
 
-def plot(data: dict, path: Path) -> bool:
+def _fused_table(groups: list[tuple[str, list[dict]]], key: str = "fused") -> list[str]:
+    lines = [f"| pairs | n | grey < {MIN_INLIERS} | fused < {MIN_INLIERS} | rescued | fell below | correct added "
+             "per pair | wrong added (share of fused matches) | precision grey → fused |",
+             "|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    for name, g in groups:
+        s, gs = _stats(g, key), _stats(g, "grey")
+        lines.append(f"| {name} | {len(g)} | {_pct(gs['below'])} | {_pct(s['below'])} | {_pct(s['rescued'])} | "
+                     f"{_pct(s['fell'])} | {_num(s['gain'])} | {_pct(s['wrong_added'])} | {_pct(gs['precision'])} → "
+                     f"{_pct(s['precision'])} |")
+    return lines
+
+
+def _calibration(data: dict[str, Any], pairs: list[dict]) -> list[str]:
+    fits = data["fits"]
+    if not fits:
+        return []
+    lines = ["## Held-out colour-constant weights (`lightfast vtr calibrate`, paper §IV-A)", "",
+             "Each sequence is fitted alone (`calibrate` on its images only) and its weights are tested only on the "
+             "other sequence(s): a test sequence plays no part in the weights it is scored with.", "",
+             "| fitted on | images | pairs scored | rule | α | β | 1 − α − β | training: F_fit | printed F_v | "
+             "printed F_r | curve minimum: α (1 − α − β), score |",
+             "|---|---:|---:|---|---:|---:|---:|---:|---:|---:|---|"]
+    for name, f in fits.items():
+        end = " (range end)" if f["on_range_end"] else ""
+        pv, pr = f["printed"]["fv"], f["printed"]["fr"]
+        lo = min(f["curve"], key=lambda row: row[2])
+        lines.append(f"| `{name}` | {f['images']} | {f['pairs']} | {f['rule']} | {f['alpha']:+.2f}{end} | "
+                     f"{f['beta']:+.3f} | {f['illuminant_exponent']:+.3f} | {f['correct_per_pair']:.2f} "
+                     f"({_pct(f['precision'])}) | {pv['correct_per_pair']:.2f} ({_pct(pv['precision'])}) | "
+                     f"{pr['correct_per_pair']:.2f} ({_pct(pr['precision'])}) | {lo[0]:+.2f} "
+                     f"({1 - lo[0] - lo[1]:+.2f}), {lo[2]:.2f} |")
+    lines += ["", "Training columns: correct matches per pair (precision) of that image alone on the sampled pairs "
+              f"of the fitting sequence, α range {fits[next(iter(fits))]['alpha_range']}.", "",
+              "Test (all pairs of the test sequence, and Q4: its quarter of pairs with the largest Δ; cells: correct "
+              "per pair (precision; share < 6); grey ∪ S: share of pairs rescued / wrong matches added as a share of "
+              "the union's matches):", "",
+              "| tested on | source | weights (α, β) | all pairs | Q4 | grey ∪ S, all | grey ∪ S, Q4 |",
+              "|---|---|---|---:|---:|---:|---:|"]
+    printed = ColorConstantConfig()
+    for test in data["sequences"]:
+        tp = [p for p in pairs if p["sequence"] == test]
+        tq = _bins(tp)[3][1]
+        keys = ["fv", "fr", "peak", *[f"fit:{t}" for t in fits if t != test]]
+        for k in keys:
+            if k not in tp[0]["counts"]:
+                continue
+            w = ((printed.alpha_v, printed.beta_v) if k == "fv" else (printed.alpha_r, printed.beta_r)
+                 if k == "fr" else (fits[k[4:]]["alpha"], fits[k[4:]]["beta"]) if k.startswith("fit:") else None)
+            ws = f"{w[0]:+.2f}, {w[1]:+.3f}" if w else "Eq. 7"
+            cells = []
+            for g in (tp, tq):
+                s = _stats(g, k)
+                cells.append(f"{_num(s['correct'], 2)} ({_pct(s['precision'])}; {_pct(s['below'])})")
+            for g in (tp, tq):
+                s = _stats(g, f"grey+{k}")
+                cells.append(f"{_pct(s['rescued'])} / {_pct(s['wrong_added'])}")
+            lines.append(f"| `{test}` | {label(k)} | {ws} | " + " | ".join(cells) + " |")
+        fa, fq = _stats(tp, "fused"), _stats(tq, "fused")
+        lines.append(f"| `{test}` | paper's fused (grey ∪ F_v ∪ F_r) | printed | | | {_pct(fa['rescued'])} / "
+                     f"{_pct(fa['wrong_added'])} | {_pct(fq['rescued'])} / {_pct(fq['wrong_added'])} |")
+    lines.append("")
+    for test in data["sequences"]:
+        tp = [p for p in pairs if p["sequence"] == test]
+        for t in (t for t in fits if t != test):
+            fit, best = _stats(tp, f"fit:{t}"), max(("fv", "fr"), key=lambda k: _stats(tp, k)["correct"])
+            b = _stats(tp, best)
+            verdict = ("more" if fit["correct"] > b["correct"] else "fewer" if fit["correct"] < b["correct"]
+                       else "as many")
+            lines.append(f"- `{test}`, weights fitted on `{t}`: F_fit {fit['correct']:.2f} correct matches per pair, "
+                         f"{verdict} than the better printed image ({label(best)}, {b['correct']:.2f}); grey ∪ F_fit "
+                         f"rescues {_pct(_stats(tp, f'grey+fit:{t}')['rescued'])} of the pairs, grey ∪ {label(best)} "
+                         f"{_pct(_stats(tp, 'grey+' + best)['rescued'])}.")
+    return [*lines, ""]
+
+
+def _sun_table(data: dict[str, Any], pairs: list[dict]) -> list[str]:
+    with_sun = [p for p in pairs if p["sun_min"] is not None]
+    lacking = [s for s, v in data["sequences"].items() if v["site"] is None or v["timed"] < v["images"]]
+    head = ["## By the lower sun elevation of the two images (file-name times taken as UTC)", ""]
+    why = [f"`{s}`: " + ("no site (no `site.yaml` in its folder, no `--site`)" if data["sequences"][s]["site"] is None
+                         else "some file names carry no time") for s in lacking]
+    if not with_sun:
+        return [*head, "Skipped: " + "; ".join(why) + ".", ""]
+    groups = [(name, [p for p in with_sun if lo <= p["sun_min"] < hi])
+              for lo, hi, name in ((-90, 5, "< 5° (night, twilight)"), (5, 20, "5–20°"), (20, 40, "20–40°"),
+                                   (40, 91, "≥ 40°"))]
+    sites = "; ".join(f"`{s}`: {v['site']['latitude_deg']:.3f}°, {v['site']['longitude_deg']:.3f}°, "
+                      f"{v['site']['altitude_m']:.0f} m from {v['site_from']}"
+                      for s, v in data["sequences"].items() if v["site"])
+    return [*head, f"Sites: {sites}." + (f" Left out: {'; '.join(why)}." if why else ""), "",
+            *_source_table(groups, [*SOURCES, "fused"]), "", *_fused_table(groups), ""]
+
+
+def report(data: dict[str, Any], png: bool) -> str:
+    s, pairs, seqs = data["settings"], data["pairs"], list(data["sequences"])
+    groups = _groups(pairs, seqs)
+    rows = [f"| `{k}` | {v['images']} | {v['size']} | {v['first'] or '?'} | {v['last'] or '?'} | "
+            f"{v['images'] * (v['images'] - 1) // 2} |" for k, v in data["sequences"].items()]
+    q4 = _bins(pairs)[3][1]
+    key = {k: _stats(q4, k) for k in [*SOURCES, "fused"]}
+    lines = [
+        "# Colour-constant images on real fixed-camera time-lapses (paper §IV-A, Fig. 2(c, d))", "",
+        f"Data: `{s['data']}`" + (f" ({data['title']})" if data.get("title") else "") + ", read in place; "
+        f"sequences (its sub-folders of images{', as chosen by `--sequences`' if data.get('chosen') else ''}): "
+        f"{', '.join(f'`{k}`' for k in seqs)}.", "",
+        "| sequence | images | size | first image | last image | pairs |", "|---|---:|---|---|---|---:|", *rows, "",
+        *[f"- {n}" for n in data["notes"]], *([""] if data["notes"] else []),
+        f"All pairs within each sequence ({len(pairs)}), {s['feature'].upper()} with {s['max_features']} features "
+        f"per image and source ({s['normalization']} 8-bit mapping), whole-image matching (nearest neighbour, ratio "
+        f"0.8, mutual); correct = both keypoints within {s['tolerance']:g} px (fixed cameras). Cells of the source "
+        f"tables: correct matches per pair (precision = correct / all matches; share of pairs with < {MIN_INLIERS} "
+        "correct). Fused = grey ∪ F_v ∪ F_r (paper Fig. 4): it keeps every correct greyscale match by construction, "
+        "so it is judged by the pairs it rescues (grey < 6 correct, fused ≥ 6) and the wrong matches it adds.", "",
+        f"Largest lighting changes (Q4 of Δ, {len(q4)} pairs): grey {key['grey']['correct']:.1f} correct per pair "
+        f"({_pct(key['grey']['precision'])}), F_v {key['fv']['correct']:.1f} ({_pct(key['fv']['precision'])}), F_r "
+        f"{key['fr']['correct']:.1f} ({_pct(key['fr']['precision'])}), peak {key['peak']['correct']:.1f} "
+        f"({_pct(key['peak']['precision'])}); fused rescues {_pct(key['fused']['rescued'])} of the pairs (grey "
+        f"< 6 in {_pct(key['grey']['below'])}, fused in {_pct(key['fused']['below'])}) and adds "
+        f"{key['fused']['gain']:.1f} correct and {_pct(key['fused']['wrong_added'])} wrong matches (share of its "
+        "matches).", "",
+        "## Per source, by lighting change Δ (quartiles over all pairs)", "",
+        *_source_table(groups, list(SOURCES)), "",
+        "## Fused (grey ∪ F_v ∪ F_r) against greyscale", "", *_fused_table(groups), "",
+        *_sun_table(data, pairs), *_calibration(data, pairs),
+        "Caveats: a match counts as correct by position only (the camera is assumed fixed; jitter beyond the "
+        "tolerance counts as wrong); scene changes between dates (people, vehicles, snow, wet ground, lights) "
+        "count against every source alike; the cameras' spectral sensitivities, response curves and compression "
+        "are unknown.", "",
+        "Median feature extraction time per image, ms: " + "; ".join(
+            f"`{q}`: " + ", ".join(f"{label(k)} {v:.0f}" for k, v in t.items()) for q, t in data["timing_ms"].items())
+        + ".", "",
+    ]
+    if png:
+        lines += [f"Plot: `{Path(s['output']).with_suffix('.png').name}` (left: correct matches per pair against Δ; "
+                  "right: the calibration curves).", ""]
+    lines += [f"Generated {data['generated']} by `{data['command']}` in {data['seconds']:.0f} s (Python "
+              f"{platform.python_version()}, NumPy {np.__version__}, OpenCV {cv2.__version__}, {platform.machine()}).",
+              ""]
+    return "\n".join(lines)
+
+
+def plot(data: dict[str, Any], path: Path) -> bool:
     try:
         import matplotlib
 
@@ -294,182 +438,82 @@ def plot(data: dict, path: Path) -> bool:
         import matplotlib.pyplot as plt
     except ImportError:
         return False
-    combos = [c for c in (("orb", "fixed"), ("sift", "fixed"))
-              if any(p["feature"] == c[0] and p["normalization"] == c[1] for p in data["pairs"])]
-    fig, axes = plt.subplots(1, max(len(combos), 1), figsize=(6.5 * max(len(combos), 1), 4.5), squeeze=False)
+    fig, (ax, bx) = plt.subplots(1, 2, figsize=(13, 4.5))
+    pairs = data["pairs"]
+    d = np.array([p["delta"] for p in pairs], float)
+    edges = np.nanquantile(d, np.linspace(0, 1, 9))
+    centres = 0.5 * (edges[1:] + edges[:-1])
     colors = {"grey": "0.4", "fv": "tab:green", "fr": "tab:red", "peak": "tab:blue", "fused": "k"}
-    for ax, (feature, norm) in zip(axes[0], combos, strict=False):
-        pairs = [p for p in data["pairs"] if p["feature"] == feature and p["normalization"] == norm]
-        deltas = np.array([p["delta_local"] for p in pairs])
-        edges = np.nanquantile(deltas, np.linspace(0, 1, 9))
-        centers = 0.5 * (edges[1:] + edges[:-1])
-        pct = [p for p in data["pairs"] if p["feature"] == feature and p["normalization"] == "percentile"]
-        for group, style, suffix in ((pairs, "-o", ""), (pct, "--", " (percentile)")):
-            if not group:
-                continue
-            deltas = np.array([p["delta_local"] for p in group])
-            for c in (*SOURCES, "fused"):
-                if style == "--" and c == "grey":
-                    continue  # greyscale does not depend on the mapping
-                y = np.array([p["counts"][c]["correct"] for p in group], float)
-                means = [np.mean(y[(deltas >= lo) & ((deltas < hi) | (hi == edges[-1]) & (deltas <= hi))])
-                         for lo, hi in itertools.pairwise(edges)]
-                ax.plot(centers, np.maximum(means, 0.1), style, color=colors[c], label=LABEL[c] + suffix,
-                        lw=2.5 if c == "fused" else 1.5, ms=4, alpha=1.0 if style == "-o" else 0.6)
-        ax.set_yscale("log")
-        ax.set_xlabel("lighting change Δ (median |Δ log brightness|, exposure removed)")
-        ax.set_ylabel("correct matches per pair (mean over octile bin)")
-        ax.set_title(f"{feature.upper()}, webcam time-lapse (solid: {norm} mapping, dashed: percentile)")
-        ax.axhline(MIN_INLIERS, color="0.7", ls=":", lw=1)
-        ax.grid(True, which="both", alpha=0.3)
-        ax.legend(fontsize=7, ncol=2)
+    for k, c in colors.items():
+        y = np.array([p["counts"][k][1] for p in pairs], float)
+        means = [y[(d >= lo) & ((d < hi) | (hi == edges[-1]))].mean() for lo, hi in itertools.pairwise(edges)]
+        ax.plot(centres, np.maximum(means, 0.1), "-o", color=c, label=label(k), ms=3, lw=2.5 if k == "fused" else 1.5)
+    ax.set(yscale="log", xlabel="lighting change Δ (median |Δ log brightness|, exposure removed)",
+           ylabel="correct matches per pair (mean per octile of Δ)")
+    ax.axhline(MIN_INLIERS, color="0.7", ls=":")
+    ax.legend(fontsize=8)
+    ax.grid(True, which="both", alpha=0.3)
+    for name, f in data["fits"].items():
+        cv = np.array(f["curve"])
+        line = bx.plot(cv[:, 0], cv[:, 2], "-", label=f"fit on {name} ({f['rule']})")[0]
+        for k, m in (("fv", "s"), ("fr", "^")):
+            bx.plot(f["printed"][k]["alpha"], f["printed"][k]["correct_per_pair"], m, color=line.get_color(),
+                    label=f"printed {label(k)} on {name}")
+        bx.axvline(f["alpha"], color=line.get_color(), ls=":", lw=0.8)
+    bx.set(xlabel="α", ylabel="training: correct matches per pair of F_α", title="calibration curves")
+    bx.grid(True, alpha=0.3)
+    if data["fits"]:
+        bx.legend(fontsize=7)
     fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=".png")
-    os.close(fd)
-    fig.savefig(tmp, dpi=110, format="png")
+    tmp = path.with_name(f".{path.name}.tmp")
+    fig.savefig(tmp, dpi=100, format="png")
     plt.close(fig)
-    os.chmod(tmp, 0o644)
-    os.replace(tmp, path)
+    write_bytes_atomic(path, tmp.read_bytes())
+    tmp.unlink()
     return True
 
 
-def _summary(data: dict) -> list[str]:
-    """Key numbers for the largest lighting changes (Q4 of Δ), per feature type and mapping."""
-    lines = ["Largest lighting changes (Q4 of Δ), correct matches per pair, mean (pairs with < "
-             f"{MIN_INLIERS} correct):", ""]
-    combos = sorted({(p["feature"], p["normalization"]) for p in data["pairs"]},
-                    key=lambda x: (x[0] != "orb", x[1] != "fixed", x))
-    for feature, norm in combos:
-        pairs = [p for p in data["pairs"] if p["feature"] == feature and p["normalization"] == norm]
-        bins, _ = _bins_delta(pairs)
-        _, lo, hi = bins[3]
-        q4 = [p for p in pairs if _in(p, lo, hi, "delta_local", True)]
-
-        def stat(c: str, group: list[dict] = q4) -> str:
-            y = np.array([p["counts"][c]["correct"] for p in group], float)
-            return f"{y.mean():.1f} ({100 * np.mean(y < MIN_INLIERS):.0f} %)"
-
-        lines.append(f"- {feature.upper()}, {norm}: grey {stat('grey')}, F_v {stat('fv')}, F_r {stat('fr')}, "
-                     f"peak {stat('peak')}, fused {stat('fused')}.")
-    return [*lines, ""]
-
-
-def report(data: dict, png_written: bool) -> str:
-    s = data["settings"]
-    n_pairs = len({(p["sequence"], p["reference"], p["query"]) for p in data["pairs"]})
-    timing = data["timing_ms"]
-    if s["references"] > 0:
-        pairing = (f"Every image is matched against each of the {s['references']} images of highest sun elevation "
-                   "of its sequence (" + "; ".join(f"{seq}: " + ", ".join(i["name"] for i in imgs if i["reference"])
-                                                   for seq, imgs in data["images"].items()) + ")")
-    else:
-        pairing = "All image pairs within each sequence are matched"
-    lines = [
-        "# Colour-constant images on a real webcam time-lapse (paper §IV-A, Fig. 2(c, d))",
-        "",
-        f"Data: `{s['data']}` ({', '.join(f'{k}: {len(v)} images' for k, v in data['images'].items())}; fixed "
-        f"webcams, JPEG-origin PNG, read in place). {pairing}: {n_pairs} pairs, over the whole image (nearest "
-        f"neighbour, ratio 0.8, mutual), {s['max_features']} features per image and source. A match is correct "
-        f"when both keypoints are within {s['tolerance']:g} px (fixed cameras). Fused = grey ∪ F_v ∪ F_r (the "
-        "three sources of paper Fig. 4): greyscale matches plus the colour-constant matches not already found "
-        "(both keypoints on the same 2-px cell).",
-        "",
-        "Cells: mean correct matches per pair (precision = correct / all matches; share of pairs with fewer than "
-        f"{MIN_INLIERS} correct matches, the paper's localization threshold). 'pairs fused > grey': share of pairs "
-        "where the fused set has more correct matches than greyscale alone; 'fused − grey': mean gain.",
-        "",
-        *_summary(data),
-        "Caveats: the webcam images are JPEG-origin (chroma subsampled and blocky; unknown white balance, response "
-        "curve, spectral sensitivities and auto exposure), while the paper used raw Bumblebee XB3 stereo images; F_v "
-        "and the peak image are almost pure chroma (illuminant exponents −0.06 and 0) and show the JPEG chroma "
-        "blocks. The scenes also change between dates (market stalls, vehicles, people, snow, wet ground, night "
-        "lights), which no image transform undoes, and Δ mixes such changes with lighting.",
-        "",
-        *tables(data),
-        "Feature extraction time per image (detect + describe of one 640×471 / 704×547 image, OpenCV default "
-        "threads, shared and loaded 2-core machine):",
-        "",
-        "| feature / mapping / source | median ms | images |",
-        "|---|---:|---:|",
-        *[f"| {k} | {v['median']:.1f} | {v['n']} |" for k, v in sorted(timing.items())],
-        "",
-    ]
-    if png_written:
-        lines += [f"Plot: `{Path(s['output']).with_suffix('.png').name}` (correct matches against Δ; dashed: "
-                  "percentile mapping).", ""]
-    lines += [
-        f"Generated {data['generated']} by `benchmarks/vtr_timelapse.py` in {data['seconds']:.0f} s (Python "
-        f"{platform.python_version()}, NumPy {np.__version__}, OpenCV {cv2.__version__}, {platform.machine()}).",
-        "",
-    ]
-    return "\n".join(lines)
-
-
-# --------------------------------------------------------------------------------------------------------------
-# Files
-
-PAIR_COLUMNS = ("sequence", "reference", "query", "sun_elevation_reference_deg", "sun_elevation_query_deg",
-                "sun_elevation_min_deg", "delta_local", "delta_global")
-COUNT_COLUMNS = tuple(f"{c}_{k}" for c in (*SOURCES, "fused") for k in ("matches", "correct", "features"))
-
-
-def to_json(data: dict) -> str:
-    """Compact JSON: the pair table once, and per feature/mapping one row of counts per pair."""
-    keys: list[tuple] = []
-    index: dict[tuple, int] = {}
-    counts: dict[str, list[list[int]]] = {}
-    for p in data["pairs"]:
-        key = tuple(p[c] for c in PAIR_COLUMNS)
-        if key not in index:
-            index[key] = len(keys)
-            keys.append(key)
-        rows = counts.setdefault(f"{p['feature']}/{p['normalization']}", [])
-        rows.append([index[key]] + [p["counts"][c][k] for c in (*SOURCES, "fused")
-                                    for k in ("matches", "correct", "features")])
+def to_json(data: dict[str, Any]) -> str:
+    """Compact: one row per pair, the counts as [matches, correct] in the order of ``count_keys``."""
+    keys = sorted({k for p in data["pairs"] for k in p["counts"]})
+    seqs = list(data["sequences"])
+    rows = [[seqs.index(p["sequence"]), p["ref"], p["query"], p["delta"], p["sun_min"],
+             *[v for k in keys for v in p["counts"].get(k, [None, None])]] for p in data["pairs"]]
     out = {k: v for k, v in data.items() if k != "pairs"}
-    out.update(pair_columns=list(PAIR_COLUMNS), pairs=[list(k) for k in keys],
-               count_columns=["pair", *COUNT_COLUMNS], counts=counts)
-    return json.dumps(out, separators=(",", ":")) + "\n"
+    out.update(pair_columns=["sequence", "ref", "query", "delta", "sun_min"], count_keys=keys, pairs=rows)
+    return json.dumps(out, separators=(",", ":"), ensure_ascii=False) + "\n"
 
 
-def from_json(text: str) -> dict:
+def from_json(text: str) -> dict[str, Any]:
     raw = json.loads(text)
+    seqs, keys = list(raw["sequences"]), raw["count_keys"]
     pairs = []
-    for combo, rows in raw["counts"].items():
-        feature, norm = combo.split("/")
-        for row in rows:
-            p = dict(zip(PAIR_COLUMNS, raw["pairs"][row[0]], strict=True))
-            vals = iter(row[1:])
-            p["counts"] = {c: {k: next(vals) for k in ("matches", "correct", "features")} for c in (*SOURCES, "fused")}
-            pairs.append({**p, "feature": feature, "normalization": norm})
-    data = {k: v for k, v in raw.items() if k not in ("pair_columns", "pairs", "count_columns", "counts")}
+    for row in raw["pairs"]:
+        counts = {k: row[5 + 2 * i: 7 + 2 * i] for i, k in enumerate(keys) if row[5 + 2 * i] is not None}
+        pairs.append({"sequence": seqs[row[0]], "ref": row[1], "query": row[2], "delta": row[3], "sun_min": row[4],
+                      "counts": counts})
+    data = {k: v for k, v in raw.items() if k not in ("pair_columns", "count_keys", "pairs")}
     data["pairs"] = pairs
     return data
 
 
-def _atomic_write(path: Path, text: str) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    with os.fdopen(fd, "w") as fh:
-        fh.write(text)
-    os.chmod(tmp, 0o644)  # mkstemp creates 0600
-    os.replace(tmp, path)
-
-
 def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--data", type=Path, default=DATA)
-    ap.add_argument("--sequences", default="courbevoie,chamonix")
-    ap.add_argument("--features", default="orb,sift", help="comma-separated: orb, sift")
-    ap.add_argument("--normalizations", default="fixed,percentile", help="comma-separated: fixed, percentile")
-    ap.add_argument("--references", type=int, default=0,
-                    help="match every image against the N images of highest sun elevation; 0: all image pairs")
+    ap = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
+    ap.add_argument("--data", type=Path, default=default_data(),
+                    help="folder of sequence folders (default: $LIGHTFAST_SHARED or ../shared, then "
+                    "data/webcam_timelapse)")
+    ap.add_argument("--sequences", default="", help="comma-separated sequence folders (default: all)")
+    ap.add_argument("--site", type=parse_site, action="append", metavar="NAME=LAT,LON[,ALT]",
+                    help="site of a sequence without SEQUENCE/site.yaml (degrees, metres); repeatable")
+    ap.add_argument("--feature", default="orb", choices=("orb", "sift"))
+    ap.add_argument("--normalization", default="fixed", choices=("fixed", "percentile"))
     ap.add_argument("--max-features", type=int, default=1000)
     ap.add_argument("--tolerance", type=float, default=4.0, help="correct-match radius, px")
-    ap.add_argument("--output", type=Path, default=RESULTS / "vtr_timelapse.md")
-    ap.add_argument("--report-only", action="store_true",
-                    help="re-render the report and plot from the .json of --output, without matching")
+    ap.add_argument("--rule", default="eq10", choices=RULES, help="calibration: beta from alpha (eq10 or sum1)")
+    ap.add_argument("--calibration-pairs", type=int, default=200, help="calibration: pairs scored per alpha")
+    ap.add_argument("--no-calibration", action="store_true", help="skip the held-out calibration")
+    ap.add_argument("--output", type=Path, default=ROOT / "benchmarks" / "results" / "vtr_timelapse.md")
+    ap.add_argument("--report-only", action="store_true", help="re-render the report and plot from the .json")
     args = ap.parse_args()
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(message)s")
     json_path = args.output.with_suffix(".json")
@@ -480,10 +524,18 @@ def main() -> int:
         data = run(args)
         data["seconds"] = time.perf_counter() - t0
         data["generated"] = dt.datetime.now(dt.UTC).isoformat(timespec="seconds")
-        _atomic_write(json_path, to_json(data))
-    png_written = plot(data, args.output.with_suffix(".png"))
-    text = report(data, png_written)
-    _atomic_write(args.output, text)
+        data["chosen"] = bool(args.sequences)
+        data["command"] = " ".join(["benchmarks/vtr_timelapse.py", *[
+            shown(a) if Path(a).is_absolute() else a for a in sys.argv[1:]]])
+        data["settings"] = {"data": shown(args.data), "feature": args.feature, "normalization": args.normalization,
+                            "max_features": args.max_features, "tolerance": args.tolerance, "rule": args.rule,
+                            "calibration_pairs": args.calibration_pairs, "output": shown(args.output)}
+        prov = args.data / "PROVENANCE.md"
+        data["title"] = prov.read_text().splitlines()[0].lstrip("# ").strip() if prov.is_file() else ""
+        write_text_atomic(json_path, to_json(data))
+    png = plot(data, args.output.with_suffix(".png"))
+    text = report(data, png)
+    write_text_atomic(args.output, text)
     print(text)
     return 0
 
