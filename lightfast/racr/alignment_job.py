@@ -11,7 +11,8 @@
   :meth:`AlignmentJob.run` computes without touching the scheme (safe outside its lock);
   :meth:`~lightfast.racr.scheme.RacrScheme.commit` publishes its ``result``
   (:class:`~lightfast.racr.fast_alignment.FastAlignmentResult` or :class:`~lightfast.racr.fine.FineAlignmentResult`)
-  or its ``error`` (:class:`~lightfast.racr.errors.RacrError`).
+  or its ``error`` (:class:`~lightfast.racr.errors.RacrError`; also a fast result whose fitness is below
+  ``FastAlignmentConfig.min_fitness``, which fast_align never reports converged).
 """
 from __future__ import annotations
 
@@ -137,6 +138,13 @@ class AlignmentJob:
                     self._obs.points, self._reference, T_ref_cur_init=self._T_init, sigma_init=self._sigma_init,
                     config=self._fast_config,
                 )
+            fitness = self.result.fitness if isinstance(self.result, FastAlignmentResult) else 1.0
+            if fitness < self._fast_config.min_fitness:
+                # never published: the scheme would otherwise call it converged once a re-run ends where it ended
+                self.result = None
+                raise AlignmentError(
+                    f"the fast alignment ended on a fit of {fitness:.3f} of the sampled points, below min_fitness="
+                    f"{self._fast_config.min_fitness}: a wrong local minimum or too little overlap")
         except RacrError as exc:
             self.error = exc
         self.seconds = time.perf_counter() - start

@@ -6,13 +6,12 @@ Two real data sets, both read in place from ``../shared/data/3dmatch_redkitchen_
   along its principal axis into a reference part and an overlapping current part (about 55 % of each is shared),
   the current part re-sampled at different points (mid-points between neighbours) with 2 mm noise, then moved by
   a known similarity. The truth is exact, so thresholds can be tight.
-* **The real pair** ``src.npy`` → ``ref.npy`` with ``gt.npy`` (two fragments fused from different frames, ~45 %
-  overlap). Its ground truth is not the geometric optimum of the pair: every geometric registration tried — this
-  module (both rigid solvers) and Open3D's rigid point-to-plane ICP and GICP, started at or near ``gt.npy`` —
-  settles 0.8–1.3° and 7–10 cm away from it; this module ends 1.3–3.6 % off in scale, Open3D's (non-robust)
-  Umeyama ICP with scaling 3–7 % (the pair's scale lies in a long, flat valley of the cost, with more than one
-  minimum). The issue's acceptance test against ``gt.npy`` (≤ 1°, ≤ 5 cm, ≤ 1 %) is kept below as a strict
-  xfail that records this; what the pair does test is that the scale is handled consistently on real data.
+* **The real pair** ``src.npy`` → ``ref.npy`` (two fragments fused from different frames, ~45 % overlap). Its
+  ``gt.npy`` is not the pair's geometric optimum (see :func:`test_gt_npy_is_not_the_pairs_optimum`), so the pair
+  is scored against its own optimum: Open3D's scaled point-to-point ICP started at ``gt.npy``, from 20 seeded
+  starts whose seeds were fixed before they were first run (:data:`HELD_OUT_SEEDS`; the method was developed on
+  other seeds, ``docs/racr.md``). The peer (Open3D's scaled ICP from the same starts) is in
+  ``benchmarks/results/racr_alignment.md``.
 """
 from __future__ import annotations
 
@@ -24,11 +23,22 @@ from scipy.spatial import cKDTree
 
 from lightfast.config import ConfigError
 from lightfast.geometry import project_to_so3, rotation_angle_deg, so3_exp
-from lightfast.racr import AlignmentError, FastAlignmentConfig, RacrError, ReferenceCloud, fast_align
+from lightfast.racr import (
+    AlignmentError,
+    FastAlignmentConfig,
+    FineAlignmentConfig,
+    RacrError,
+    ReferenceCloud,
+    fast_align,
+)
+from lightfast.racr.alignment_job import AlignmentJob, _Observation
 
 SIGMAS = (0.5, 0.8, 1.6, 2.0)
 R_TRUE = so3_exp(np.array([0.3, -0.5, 0.2]))  # the known similarity of the real-surface set
 T_TRUE_M = np.array([0.4, -0.2, 1.0])
+#: the pair's held-out starts, fixed before they were first run (development used seeds 1000-1129)
+HELD_OUT_SEEDS = tuple(range(20))
+OPTIMUM_DISTANCE_M = 0.02  # Open3D's correspondence distance for the pair's optimum (= kernel_final_m)
 
 
 @pytest.fixture(scope="module")
@@ -169,19 +179,159 @@ def test_injected_scale_is_handled_consistently_on_the_real_pair(pair, pair_refe
     assert base.rmse_m < 0.01 and base.fitness > 0.3
 
 
+def _open3d_scaled_icp(points_cur: np.ndarray, points_ref: np.ndarray, T0: np.ndarray, sigma0: float,
+                       distance_m: float) -> tuple[np.ndarray, float]:
+    """Open3D's scaled point-to-point ICP (Umeyama with scaling) from ``(T0, sigma0)``, run until it stands still:
+    ``(T_ref_cur, σ)``."""
+    import open3d as o3d
+
+    reg = o3d.pipelines.registration
+    cloud = o3d.geometry.PointCloud
+    S0 = T0.copy()
+    S0[:3, :3] *= sigma0
+    source, target = (cloud(o3d.utility.Vector3dVector(np.array(p, dtype=float))) for p in (points_cur, points_ref))
+    res = reg.registration_icp(
+        source, target, distance_m, S0, reg.TransformationEstimationPointToPoint(with_scaling=True),
+        reg.ICPConvergenceCriteria(relative_fitness=1e-12, relative_rmse=1e-12, max_iteration=2000),
+    )
+    S = np.asarray(res.transformation)
+    sigma = float(np.cbrt(np.linalg.det(S[:3, :3])))
+    T = np.eye(4)
+    T[:3, :3] = project_to_so3(S[:3, :3] / sigma)
+    T[:3, 3] = S[:3, 3]
+    return T, sigma
+
+
+@pytest.fixture(scope="module")
+def pair_optimum(pair) -> tuple[np.ndarray, float]:
+    """The pair's own optimum ``(T_ref_src, σ)``: Open3D's scaled point-to-point ICP started at ``gt.npy``."""
+    src, ref, T_gt = pair
+    return _open3d_scaled_icp(src, ref, T_gt, 1.0, OPTIMUM_DISTANCE_M)
+
+
+def _seeded_start(T_opt: np.ndarray, sigma_opt: float, centre: np.ndarray, seed: int) -> tuple[np.ndarray, float,
+                                                                                                 float]:
+    """``(T0, sigma_init, σ)``: the current cloud is ``src / σ`` (σ log-uniform in [0.5, 2]); the start is the
+    optimum moved about the cloud's centre ``centre`` (reference frame) by 5–15° about a random axis, 5–20 cm in a
+    random direction and a scale factor in [0.95, 1.05]."""
+    rng = np.random.default_rng(seed)
+    axis = rng.normal(size=3)
+    dR = so3_exp(np.radians(rng.uniform(5.0, 15.0)) * axis / np.linalg.norm(axis))
+    shift = rng.normal(size=3)
+    shift *= rng.uniform(0.05, 0.20) / np.linalg.norm(shift)
+    sigma = float(np.exp(rng.uniform(np.log(0.5), np.log(2.0))))
+    ds = rng.uniform(0.95, 1.05)
+    T = np.eye(4)
+    T[:3, :3] = dR @ T_opt[:3, :3]
+    T[:3, 3] = ds * dR @ (T_opt[:3, 3] - centre) + centre + shift
+    return T, sigma * sigma_opt * ds, sigma
+
+
+@pytest.fixture(scope="module")
+def held_out_runs(pair, pair_reference, pair_optimum) -> list[tuple[int, float, float, float, bool]]:
+    """``(seed, rotation error [deg], translation error [m], relative scale error, converged)`` of the default fast
+    alignment from each held-out start, errors against the pair's optimum (a raised AlignmentError: inf, False)."""
+    src, _, _ = pair
+    T_opt, s_opt = pair_optimum
+    centre = (s_opt * src @ T_opt[:3, :3].T + T_opt[:3, 3]).mean(axis=0)
+    runs = []
+    for seed in HELD_OUT_SEEDS:
+        T0, s0, sigma = _seeded_start(T_opt, s_opt, centre, seed)
+        try:
+            result = fast_align(src / sigma, pair_reference, T_ref_cur_init=T0, sigma_init=s0)
+        except AlignmentError:
+            runs.append((seed, np.inf, np.inf, np.inf, False))
+            continue
+        runs.append((seed, *_errors(result, T_opt, sigma * s_opt), result.converged))
+    return runs
+
+
+def test_gt_npy_is_not_the_pairs_optimum(pair, pair_optimum) -> None:
+    """Why the pair is not scored against ``gt.npy``: 3DMatch's ``gt.log`` (which ``gt.npy`` copies) is built from
+    the trajectory poses of the frames each fragment was fused from, not from registering the two fragments, and
+    their geometry does not agree with it at the level of 1°, 5 cm, 1 %. Started at ``gt.npy``, Open3D's scaled
+    ICP settles 0.5–3.3°, 5.6–25 cm, 2.2–7 % from it (correspondence distance 1–10 cm), fast_align 0.8–1.1°,
+    9.5–10.6 cm, 1.7–2.2 % (over sample seeds, or all points); and the pair fixes scale only to about ±1 % (the
+    optimum's σ moves from 0.978 to 0.967 as the distance goes from 1 to 4 cm). The optimum used here (2 cm)
+    stands still where it stopped and lies 0.86°, 10.4 cm, 2.5 % from ``gt.npy``."""
+    src, ref, T_gt = pair
+    T_opt, s_opt = pair_optimum
+    T_again, s_again = _open3d_scaled_icp(src, ref, T_opt, s_opt, OPTIMUM_DISTANCE_M)
+    assert rotation_angle_deg(T_again[:3, :3], T_opt[:3, :3]) < 1e-6
+    assert np.linalg.norm(T_again[:3, 3] - T_opt[:3, 3]) < 1e-8 and abs(s_again / s_opt - 1.0) < 1e-9
+    rot_deg = rotation_angle_deg(T_opt[:3, :3], T_gt[:3, :3])
+    t_m = np.linalg.norm(T_opt[:3, 3] - T_gt[:3, 3])
+    assert rot_deg > 0.5 and t_m > 0.05 and abs(s_opt - 1.0) > 0.01
+
+
 @pytest.mark.xfail(
     strict=True,
-    reason="gt.npy is not the pair's geometric optimum: started at or near gt.npy, every geometric registration "
-    "tried (this module, Open3D rigid ICP/GICP, Open3D scaled ICP) settles >= 0.8 deg / 7 cm / 1.3 % away",
+    reason="measured on the held-out starts: 2/20 within 0.5 deg / 1 cm / 0.5 % of the optimum. 17 converge "
+    "0.30-0.40 deg, 0.99-1.27 cm, 0.30-0.54 % from it (2 of them inside 1 cm), at fast_align's own minimum (from "
+    "gt.npy it stops 0.40 deg, 1.04 cm, 0.32 % away: Tukey point-to-plane on 3000 points is not Open3D's "
+    "point-to-point objective); 2 reach the iteration cap there (1.01, 1.46 cm); 1 stops 13.7 deg / 49 cm away "
+    "on a fit of 0.13, not reported converged. Open3D's scaled ICP from the same starts: 0/20 (all at 0.71 deg, "
+    "2.5 cm, 0.34 %, another of its own fixed points)",
 )
-@pytest.mark.parametrize("sigma", SIGMAS)
-def test_issue_acceptance_against_gt_npy(pair, pair_reference, sigma: float) -> None:
-    """The issue's test as written: recover gt.npy to ≤ 1°, ≤ 5 cm, ≤ 1 % from a perturbed start."""
+def test_held_out_starts_reach_the_pairs_optimum(held_out_runs) -> None:
+    """The issue's acceptance on the pair: from 20 seeded starts (5–15°, 5–20 cm, start scale within ±5 %, injected
+    scale σ ∈ [0.5, 2]), at least 19 end within 0.5°, 1 cm (translation of T_ref_cur) and 0.5 % (σ_p) of the
+    pair's optimum. Why not ``gt.npy``: it copies 3DMatch's ``gt.log``, built from the trajectory poses of the
+    frames each fragment was fused from, not from the fragments' geometry, and every registration of the pair
+    started at it leaves it for a point ≥ 0.5°, ≥ 5.6 cm, ≥ 1.7 % away; no geometric method can end at it
+    (:func:`test_gt_npy_is_not_the_pairs_optimum`)."""
+    hits = [seed for seed, rot, t, s, _ in held_out_runs if rot <= 0.5 and t <= 0.01 and s <= 0.005]
+    assert len(hits) >= 19, held_out_runs
+
+
+def test_no_held_out_start_is_reported_converged_far_from_the_optimum(held_out_runs) -> None:
+    """What holds on the held-out starts: no result reported converged more than 2° or 5 cm from the optimum.
+    Without ``min_fitness`` one is (seed 14: stopped 13.7°, 49 cm, 17 % away on a fit of 0.13 of the points)."""
+    far = [run for run in held_out_runs if run[4] and (run[1] > 2.0 or run[2] > 0.05)]
+    assert far == []
+    assert sum(run[4] for run in held_out_runs) >= 15  # not vacuous: most starts are reported converged
+
+
+@pytest.fixture(scope="module")
+def planted_wrong_start(pair) -> np.ndarray:
+    """``gt.npy`` shifted 30 cm along the reference's −x: the alignment slides into a wrong local minimum there."""
+    T0 = pair[2].copy()
+    T0[:3, 3] += [-0.3, 0.0, 0.0]
+    return T0
+
+
+def test_a_wrong_local_minimum_is_not_reported_converged(pair, pair_reference, planted_wrong_start) -> None:
+    """A wrong local minimum is a fixed point of the iteration like the right one: the step test alone
+    (``min_fitness=0``) called this stop, 37 cm and 4.5 % from gt.npy on a fit of 0.25 of the points, converged.
+    The fit criterion rejects it, and it does not reject the right minimum (0.35 of the points)."""
     src, _, T_gt = pair
-    T0, s0 = _perturbed_start(T_gt, sigma, src @ T_gt[:3, :3].T + T_gt[:3, 3], np.random.default_rng(int(10 * sigma)))
-    result = fast_align(src / sigma, pair_reference, T_ref_cur_init=T0, sigma_init=s0)
-    rot_deg, t_m, s_rel = _errors(result, T_gt, sigma)
-    assert rot_deg <= 1.0 and t_m <= 0.05 and s_rel <= 0.01
+    wrong_off = fast_align(src, pair_reference, T_ref_cur_init=planted_wrong_start,
+                           config=FastAlignmentConfig(min_fitness=0.0))
+    wrong = fast_align(src, pair_reference, T_ref_cur_init=planted_wrong_start)
+    config = FastAlignmentConfig()
+    assert wrong.pose_change <= config.pose_tolerance and wrong.scale_change <= config.scale_tolerance
+    assert wrong.iterations < config.max_iterations  # it stopped: not the iteration cap
+    assert np.linalg.norm(wrong.T_ref_cur[:3, 3] - T_gt[:3, 3]) > 0.2
+    assert wrong_off.converged  # the same stop: only the verdict differs
+    assert np.array_equal(wrong_off.T_ref_cur, wrong.T_ref_cur) and wrong_off.sigma == wrong.sigma
+    assert wrong_off.iterations == wrong.iterations and wrong_off.fitness == wrong.fitness
+    assert wrong.fitness < config.min_fitness and not wrong.converged
+    right = fast_align(src, pair_reference, T_ref_cur_init=T_gt)
+    assert right.converged and right.fitness > config.min_fitness
+
+
+def test_the_alignment_thread_does_not_publish_a_rejected_fit(pair, pair_reference, planted_wrong_start) -> None:
+    """The rACR scheme counts a fast result as converged once a re-run on the same cloud ends where it ended; so
+    the alignment job turns a fit below ``min_fitness`` into an error (the scheme keeps its previous estimate)."""
+    src, _, T_gt = pair
+    jobs = []
+    for T0 in (planted_wrong_start, T_gt):
+        obs = _Observation(seq=0, stamp=0.0, points=src, intensities=None, T_cur_cam=np.eye(4), keyframes=())
+        jobs.append(AlignmentJob("fast", obs, pair_reference, T0, 1.0, FastAlignmentConfig(),
+                                 FineAlignmentConfig()).run())
+    wrong, right = jobs
+    assert wrong.result is None and isinstance(wrong.error, AlignmentError) and "min_fitness" in str(wrong.error)
+    assert right.error is None and right.result is not None and right.result.converged
 
 
 def test_not_converging_within_the_cap_is_reported_not_raised(real_surface) -> None:
