@@ -19,7 +19,8 @@ and publishes what it returns.
    puts that camera at the reference pose); every VSE input is scaled by ``s`` (§3.3: ``P = s · P_VSE``,
    ``t_A = s · t_VSE``, keyframe translations alike) before it is handed on, and the platform stops are passed as
    ``moving=False`` poses. Hand motions then come from :meth:`RacrScheme.next_hand_motion` until it reports
-   convergence (``g ≤ η``); then the run is over and no further motion is issued.
+   convergence (``g ≤ η``); the session then checks itself (:mod:`lightfast.racr.verification`: stage ``failed``
+   or ``ambiguous`` instead of ``converged``) and the run is over: no further motion is issued.
 
 Time: stamps are seconds on the injected ``clock`` (the node's ROS clock, which also stamps the VSE's and the
 platform's messages). A command is issued at ``clock()``; its stop must be stamped at or after that and the next
