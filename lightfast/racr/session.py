@@ -25,9 +25,8 @@ and publishes what it returns.
 Time: stamps are seconds on the injected ``clock`` (the node's ROS clock, which also stamps the VSE's and the
 platform's messages). A command is issued at ``clock()``; its stop must be stamped at or after that and the next
 VSE pose used must be newer than the stop: no motion is computed from a camera pose taken before it stopped.
-Nothing here reads simulator truth: the inputs are VSE output, reported hand poses and the reference observation.
-Errors: bad input raises :class:`~lightfast.racr.errors.RacrError` subclasses at the call (the caller reports and
-goes on); the status (:attr:`RacrSession.status`) says what the session waits for and why it stopped.
+No simulator truth is read (inputs: VSE output, reported hand poses, the reference observation). Bad input raises
+:class:`~lightfast.racr.errors.RacrError` subclasses at the call; :attr:`RacrSession.status` says what it waits for.
 """
 from __future__ import annotations
 
