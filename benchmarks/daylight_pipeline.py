@@ -72,13 +72,14 @@ def in_process(size: str, frames: int, out: Path, mode: str, tracker_params: dic
 
     import numpy as np
 
-    from lightfast.daylight.lighting_map import LightingMap
+    from lightfast.daylight.lighting_map import FORMAT_VERSION, LightingMap
     from lightfast.eval.daylight import run_sequence
     from lightfast.tracking.pipeline import TrackerConfig
 
     sim = out / f"daylight-sim-{size}-{frames}-0.04"
     scene_files = (sim / "scenes" / "DS1.map.ply").read_bytes() + (sim / "scenes" / "DS1.openings.yaml").read_bytes()
-    lmap = LightingMap.load(sim / "maps" / f"DS1-0.1-{hashlib.sha1(scene_files).hexdigest()[:12]}")  # as demo.sh
+    digest = hashlib.sha1(scene_files).hexdigest()[:12]
+    lmap = LightingMap.load(sim / "maps" / f"DS1-0.1-v{FORMAT_VERSION}-{digest}")  # named as demo.sh names it
     cfg = TrackerConfig(**tracker_params)
     cpu0, wall0 = time.process_time(), time.monotonic()
     run = run_sequence(sim / "DS1.T6", lmap, mode, progress=False, tracker_config=cfg)

@@ -57,7 +57,9 @@ echo "== recording $sequence ($frames frames, $size) in $sim (reused when comple
 # with the window declared (scenes/<scene>.openings.yaml), so that light enters only through it
 map_ply="$sim/scenes/$scene.map.ply"
 openings="$sim/scenes/$scene.openings.yaml"
-map="$sim/maps/$scene-$patch_size-$(cat "$map_ply" "$openings" | sha1sum | cut -c1-12)"
+# the map format version is part of the name: a map made by an older lightfast is prepared again, not refused
+map_version=$("$bin/python" -c 'from lightfast.daylight.lighting_map import FORMAT_VERSION; print(FORMAT_VERSION)')
+map="$sim/maps/$scene-$patch_size-v$map_version-$(cat "$map_ply" "$openings" | sha1sum | cut -c1-12)"
 if [ ! -f "$map/metadata.json" ]; then
   echo "== preparing the lighting map of $scene in $map"
   "$lf" daylight prepare "$map_ply" "$sim/scenes/$scene.site.yaml" "$map" --patch-size "$patch_size" \

@@ -10,10 +10,12 @@ __all__ = [
     "CrfError",
     "DaylightError",
     "LightingMapError",
+    "LightingMapVersionError",
     "LightsError",
     "MeshError",
     "OpeningsError",
     "RadiosityError",
+    "RadiosityFileError",
     "SiteError",
     "SunPositionError",
 ]
@@ -38,6 +40,11 @@ class LightingMapError(DaylightError, InputError):
     (:mod:`~lightfast.daylight.lighting_map`)."""
 
 
+class LightingMapVersionError(LightingMapError):
+    """A lighting map written by another format version of lightfast: prepare it again
+    (:mod:`~lightfast.daylight.lighting_map`)."""
+
+
 class LightsError(DaylightError, InputError, ValueError):
     """Invalid light-set input: wrong shapes, non-unit directions, negative weights, bad sample counts
     (:mod:`~lightfast.daylight.lights`)."""
@@ -50,6 +57,10 @@ class MeshError(DaylightError, InputError, ValueError):
 
 class OpeningsError(DaylightError, InputError, ValueError):
     """An openings file or opening that cannot be used (:mod:`~lightfast.daylight.openings`)."""
+
+
+class RadiosityFileError(DaylightError, InputError, ValueError):
+    """A radiosity export or points file that cannot be read or used (:mod:`~lightfast.daylight.radiosity_export`)."""
 
 
 class RadiosityError(DaylightError, InternalError):

@@ -1,9 +1,11 @@
 """The lighting map: everything the daylight nodes need about a scene's light transport, made once (paper Fig. 2,
 green box) by ``lightfast daylight prepare MESH.ply SITE.yaml OUT``.
 
-It holds the mesh with reflectance, the site, the patches, the patch transport (visibility as a bit array, §III-E),
-and the normalized sky and ground radiosities B̂_sky, B̂_grd per vertex and colour channel (§III-B). The sun's
-B̂_sun depends on the time and is computed by :mod:`lightfast.daylight.sun_update`.
+It holds the mesh with reflectance and its own vertex normals (from the PLY, else area-weighted face normals: the
+ones every component uses), the site, the patches, the patch transport (visibility as a bit array, §III-E), the
+vertices' junction-safe ray origins (:mod:`lightfast.daylight.ray_origins`) and the normalized sky and ground
+radiosities B̂_sky, B̂_grd per vertex and colour channel (§III-B). The sun's B̂_sun depends on the time and is
+computed by :mod:`lightfast.daylight.sun_update` with the same normals and ray origins.
 
 On disk a lighting map is a directory, written atomically (it appears complete or not at all)::
 
@@ -11,8 +13,9 @@ On disk a lighting map is a directory, written atomically (it appears complete o
     OUT/mesh.ply           the mesh it was made for (lightfast's PLY with float reflectance)
     OUT/lighting_map.npz   arrays (NumPy, loaded with allow_pickle=False)
 
-Loading refuses a map of another format version, or whose mesh hash does not match the mesh (its own copy, or the
-one the caller passes), with a one-line :class:`LightingMapError`.
+Loading refuses a map of another format version (:class:`LightingMapVersionError`; version 1 maps lacked the
+normals and ray origins), or whose mesh hash does not match the mesh (its own copy, or the one the caller passes),
+with a one-line :class:`LightingMapError`.
 """
 from __future__ import annotations
 
@@ -31,12 +34,13 @@ import scipy.sparse as sp
 from numpy.typing import NDArray
 
 from lightfast.config import Config, ConfigError, config_from_mapping, param
-from lightfast.daylight.errors import LightingMapError, MeshError
+from lightfast.daylight.errors import LightingMapError, LightingMapVersionError, MeshError
 from lightfast.daylight.lights import LightSet, sky_and_ground, sun_disk
 from lightfast.daylight.mesh import ReflectanceMesh, load_ply, save_ply
 from lightfast.daylight.openings import Opening, openings_array
 from lightfast.daylight.patches import Patches, build_patches
-from lightfast.daylight.radiosity import PatchTransport, direct_irradiance, vertex_radiosity
+from lightfast.daylight.radiosity import PatchTransport, direct_irradiance, patch_ray_origins, vertex_radiosity
+from lightfast.daylight.ray_origins import RayOrigins, vertex_ray_origins
 from lightfast.daylight.sun import Site
 from lightfast.io import atomic_directory, load_npz, read_json_mapping, write_text_atomic
 from lightfast.progress import track
@@ -45,7 +49,7 @@ from lightfast.raycast import RayCaster
 log = logging.getLogger(__name__)
 
 FORMAT_NAME = "lightfast-lighting-map"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2  # 2: the mesh's vertex normals and the vertices' ray origins are stored
 UP = np.array([0.0, 0.0, 1.0])
 
 
@@ -68,8 +72,9 @@ class LightingMapConfig(Config):
                                  "hemisphere the scene covers (normalizes the gather factors).", min=0, max=65536)
     iterations: int = param(0, description="Jacobi iterations of Eq. 2 (the paper uses 10); 0 iterates until the "
                             "radiosity converges.", min=0, max=10000)
-    ray_offset_m: float = param(1e-3, description="Ray origins start this far off the surface, in metres.",
-                                min=0.0, max=0.1)
+    ray_offset_m: float = param(1e-3, description="Ray origins start at most this far off the surface, in metres "
+                                "(a tenth of the shortest incident edge where that is less; into the free side of "
+                                "every surface touching the point).", min=0.0, max=0.1)
     vertex_chunk: int = param(50_000, description="Vertices per batch of direct-light rays while preparing.",
                               min=1, max=100_000_000)
 
@@ -88,9 +93,18 @@ class LightingMap:
     #: (N, 3, 3) window openings (corner, edge u, edge v; :mod:`lightfast.daylight.openings`); none: every ray
     #: that leaves the mesh brings outdoor light
     openings: NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 3, 3)))
+    #: the vertices' ray origins (Eq. 1 visibility); none: computed from the mesh on first use
+    vertex_origins: RayOrigins | None = None
 
     def __post_init__(self) -> None:
         _ = self.mesh.vertex_normals  # computed once here, not inside the first bounded sun-update step
+
+    @cached_property
+    def ray_origins(self) -> RayOrigins:
+        """Where the vertices' visibility rays start (stored in the map; :mod:`lightfast.daylight.ray_origins`)."""
+        if self.vertex_origins is not None:
+            return self.vertex_origins
+        return vertex_ray_origins(self.mesh, offset_m=self.config.ray_offset_m)
 
     @cached_property
     def transport(self) -> PatchTransport:
@@ -128,6 +142,9 @@ class LightingMap:
             "sky_radiosity": self.sky_radiosity.astype(np.float32),
             "ground_radiosity": self.ground_radiosity.astype(np.float32),
             "openings": np.asarray(self.openings, dtype=np.float64).reshape(-1, 3, 3),
+            "vertex_normals": self.mesh.vertex_normals.astype(np.float32),
+            "ray_offset_m": self.ray_origins.offset_m.astype(np.float32),
+            "ray_covered": self.ray_origins.covered,
         }
         for name, mat in (("vertex_to_patch", p.vertex_to_patch), ("patch_to_vertex", p.patch_to_vertex)):
             csr = sp.csr_matrix(mat)
@@ -166,7 +183,7 @@ class LightingMap:
         if meta.get("format") != FORMAT_NAME:
             raise LightingMapError(f"{path} is not a lighting map (format {meta.get('format')!r})")
         if meta.get("version") != FORMAT_VERSION:
-            raise LightingMapError(
+            raise LightingMapVersionError(
                 f"{path}: lighting map format version {meta.get('version')} is not supported (this lightfast reads "
                 f"version {FORMAT_VERSION}); prepare it again with `lightfast daylight prepare`"
             )
@@ -225,18 +242,31 @@ class LightingMap:
             visible = np.unpackbits(bits, count=P * P).reshape(P, P).astype(bool)
             return PatchTransport.from_visibility(patches, visible, coverage)
 
+        normals, offset, covered = a["vertex_normals"], a["ray_offset_m"], a["ray_covered"]
+        if normals.shape != (V, 3) or offset.shape != (V, 3) or covered.shape != (V,) or covered.dtype != np.bool_:
+            raise ValueError("vertex normals or ray origins do not match the mesh")
+        if not (np.all(np.isfinite(normals)) and np.all(np.isfinite(offset))):
+            raise ValueError("vertex normals or ray origins are not finite")
+        mesh = ReflectanceMesh(mesh.vertices_m, mesh.faces, mesh.reflectance, normals.astype(np.float64))
         openings = openings_array(a["openings"]) if "openings" in a else np.zeros((0, 3, 3))
-        return cls(mesh, site, config, patches, transport, a["sky_radiosity"], a["ground_radiosity"], openings)
+        return cls(mesh, site, config, patches, transport, a["sky_radiosity"], a["ground_radiosity"], openings,
+                   RayOrigins(offset.astype(np.float64), covered))
+
+
+def _stored(a: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``a`` rounded to float32, the precision the map stores it in."""
+    return a.astype(np.float32).astype(np.float64)
 
 
 def _direct_in_chunks(mesh: ReflectanceMesh, caster: RayCaster, lights: LightSet, config: LightingMapConfig,
-                      openings: NDArray[np.float64], *, desc: str, progress: bool) -> NDArray[np.float64]:
+                      openings: NDArray[np.float64], origins: RayOrigins, *, desc: str, progress: bool
+                      ) -> NDArray[np.float64]:
     out = np.empty(mesh.num_vertices)
     starts = range(0, mesh.num_vertices, config.vertex_chunk)
     for s in track(starts, desc=desc, total=len(starts), enabled=progress, unit="chunk"):
         sl = slice(s, min(mesh.num_vertices, s + config.vertex_chunk))
         out[sl] = direct_irradiance(mesh, caster, lights, vertices=sl, offset_m=config.ray_offset_m,
-                                    openings=openings)
+                                    openings=openings, origins=origins)
     return out
 
 
@@ -256,17 +286,24 @@ def prepare_lighting_map(
         mesh.validate_topology()
     except MeshError as exc:
         raise LightingMapError(f"cannot prepare a lighting map: {exc}") from None
+    # the map's mesh carries its normals explicitly, rounded as they are stored (float32): prepared and loaded maps
+    # use bit-identical normals and ray origins
+    mesh = ReflectanceMesh(mesh.vertices_m, mesh.faces, mesh.reflectance, _stored(mesh.vertex_normals))
     caster = RayCaster(mesh.vertices_m, mesh.faces)
     patches = build_patches(mesh, patch_size_m=config.patch_size_m, normal_merge_deg=config.normal_merge_deg)
     log.info("%d vertices, %d faces, %d patches", mesh.num_vertices, mesh.num_faces, patches.count)
+    found = vertex_ray_origins(mesh, offset_m=config.ray_offset_m)
+    origins = RayOrigins(_stored(found.offset_m), found.covered)
+    log.info("ray origins: %d vertices covered by a touching surface", int(np.count_nonzero(origins.covered)))
     transport = PatchTransport.compute(patches, caster, hemisphere_rays=config.hemisphere_rays,
-                                       offset_m=config.ray_offset_m, progress=progress, openings=windows)
+                                       offset_m=config.ray_offset_m, progress=progress, openings=windows,
+                                       origins=patch_ray_origins(mesh, patches, offset_m=config.ray_offset_m))
     sky, ground = sky_and_ground(config.sky_directions, up=tuple(UP))
-    direct = np.stack([_direct_in_chunks(mesh, caster, lights, config, windows, desc=f"{lights.name} light",
-                                         progress=progress)
+    direct = np.stack([_direct_in_chunks(mesh, caster, lights, config, windows, origins,
+                                         desc=f"{lights.name} light", progress=progress)
                        for lights in (sky, ground)], axis=1)
     both = vertex_radiosity(mesh, patches, transport, direct, iterations=config.iterations or None)
     lmap = LightingMap(mesh, site, config, patches, transport, both[:, 0].astype(np.float32),
-                       both[:, 1].astype(np.float32), windows)
+                       both[:, 1].astype(np.float32), windows, origins)
     lmap.__dict__["caster"] = caster  # reuse the BVH just built
     return lmap

@@ -2,7 +2,8 @@
 
 Vertices are in metres in the map frame (REP-103: x east, y north, z up when the site heading is 0). Reflectance
 ``rho`` is linear RGB diffuse albedo in [0, 1] (not sRGB-encoded). Vertex normals are area-weighted face normals
-unless the file provides them; each vertex stands for a third of the area of its triangles.
+unless the file provides them (a lighting map stores the ones it was made with); each vertex stands for a third of
+the area of its triangles.
 
 PLY files (ASCII or binary) carry the reflectance as vertex properties ``red green blue``: float (taken as is) or
 uchar (divided by 255). Open3D clamps and quantizes colours and drops other properties, so this module reads and
@@ -61,6 +62,8 @@ class ReflectanceMesh:
             n = np.asarray(self.normals_in, dtype=np.float64)
             if n.shape != v.shape:
                 raise MeshError(f"normals must have shape {v.shape}, got {n.shape}")
+            if not np.all(np.isfinite(n)):
+                raise MeshError("normals contain NaN or infinite values")
             object.__setattr__(self, "normals_in", n)
 
     @property

@@ -8,7 +8,9 @@ Direct light, Eq. 1, per vertex v and light l (direction ``d_l`` towards the lig
 
     E⁰(v) = Σ_l w_l · max(0, n(v)·d_l) · G(l, v)            B⁰(v) = ρ(v) · E⁰(v)
 
-with G(l, v) = 1 when the ray from v towards l escapes the scene (Embree occlusion rays).
+with G(l, v) = 1 when the ray from v towards l escapes the scene (Embree occlusion rays). Rays start from
+junction-safe origins (:mod:`lightfast.daylight.ray_origins`): off the vertex into the free side of its own faces
+and of every surface touching it, so that a vertex where parts meet is neither lit through nor shadowed by them.
 
 Inter-reflections, Eq. 2. The paper iterates ``B^{k+1}(v_i) = ρ(v_i) Σ_j B^k(v_j) F(v_i, v_j) G(v_i, v_j)`` with
 B_l = B_l^K; read literally B^K would hold the K-th bounce alone, so this is implemented as the Jacobi iteration of
@@ -39,6 +41,7 @@ from lightfast.daylight.lights import LightSet
 from lightfast.daylight.mesh import ReflectanceMesh
 from lightfast.daylight.openings import through_openings
 from lightfast.daylight.patches import Patches
+from lightfast.daylight.ray_origins import RayOrigins, point_ray_origins, vertex_ray_origins
 from lightfast.progress import track
 from lightfast.raycast import RayCaster
 
@@ -54,30 +57,35 @@ def direct_irradiance(
     offset_m: float = 1e-3,
     max_rays: int = 1 << 21,
     openings: NDArray[np.float64] | None = None,
+    origins: RayOrigins | None = None,
 ) -> NDArray[np.float64]:
     """Eq. 1 without ρ: the direct irradiance ``E⁰`` of the vertices in ``vertices`` under ``lights``.
 
     ``openings`` (N, 3, 3), see :mod:`lightfast.daylight.openings`: when given (N > 0), a ray that escapes the mesh
-    brings light only if it crosses one of them."""
-    points = mesh.vertices_m[vertices]
+    brings light only if it crosses one of them. ``origins``: the vertices' ray origins (all of the mesh's
+    vertices), by default :func:`~lightfast.daylight.ray_origins.vertex_ray_origins` with ``offset_m``."""
     normals = mesh.vertex_normals[vertices]
-    out = np.zeros(len(points))
-    if len(lights.directions) == 0 or len(points) == 0:
+    out = np.zeros(len(normals))
+    if len(lights.directions) == 0 or len(normals) == 0:
         return out
+    if origins is None:
+        origins = vertex_ray_origins(mesh, offset_m=offset_m)
+    points = mesh.vertices_m[vertices] + origins.offset_m[vertices]
+    open_ = ~origins.covered[vertices]  # a covered vertex (a surface lies on it) receives no direct light
     d = lights.directions
     w = lights.weights
     block = max(1, max_rays // len(d))
     for start in range(0, len(points), block):
         n = normals[start : start + block]
         cos = n @ d.T  # (b, M)
-        vi, li = np.nonzero(cos > 0.0)
+        vi, li = np.nonzero((cos > 0.0) & open_[start : start + block, None])
         if len(vi) == 0:
             continue
-        origins = points[start + vi] + offset_m * n[vi]
-        blocked = caster.occluded(origins, d[li], t_near_m=0.0)
+        starts = points[start + vi]
+        blocked = caster.occluded(starts, d[li], t_near_m=0.0)
         if openings is not None and len(openings):
             free = np.flatnonzero(~blocked)
-            blocked[free] = ~through_openings(origins[free], d[li[free]], openings)
+            blocked[free] = ~through_openings(starts[free], d[li[free]], openings)
         contrib = np.where(blocked, 0.0, w[li] * cos[vi, li])
         out[start : start + block] += np.bincount(vi, weights=contrib, minlength=len(n))
     return out
@@ -120,11 +128,15 @@ class PatchTransport:
         progress: bool = False,
         max_rays: int = 1 << 21,
         openings: NDArray[np.float64] | None = None,
+        origins: RayOrigins | None = None,
     ) -> PatchTransport:
         """Trace the visibility of every facing patch pair (one ray each) and each patch's hemisphere coverage
-        (with ``openings``, a ray that escapes elsewhere than through one counts as covered)."""
+        (with ``openings``, a ray that escapes elsewhere than through one counts as covered). The rays start at
+        the sample points moved by ``origins`` (:func:`patch_ray_origins`), by default ``offset_m`` along the patch
+        normals; a patch whose sample point is covered (a surface lies on it) exchanges no light."""
         P = patches.count
-        pts = patches.sample_point_m + offset_m * patches.normal
+        covered = np.zeros(P, dtype=bool) if origins is None else origins.covered
+        pts = patches.sample_point_m + (offset_m * patches.normal if origins is None else origins.offset_m)
         visible = np.zeros((P, P), dtype=bool)
         rows_per_block = max(1, max_rays // max(P, 1))
         blocks = range(0, P, rows_per_block)
@@ -132,7 +144,8 @@ class PatchTransport:
             rows = slice(start, min(P, start + rows_per_block))
             cols = slice(start + 1, P)  # each unordered pair once: column > row
             front_p, front_q, _ = _pair_geometry(pts, patches.normal, rows, cols)
-            bi, q = np.nonzero((front_p > 0) & (front_q > 0) & _upper(rows, cols))
+            bi, q = np.nonzero((front_p > 0) & (front_q > 0) & _upper(rows, cols) & ~covered[rows, None]
+                               & ~covered[None, cols])
             if len(bi) == 0:
                 continue
             p_idx = bi + rows.start
@@ -142,17 +155,18 @@ class PatchTransport:
             blocked = caster.occluded(pts[p_idx], dvec, t_far_m=np.maximum(dist - 2 * offset_m, 0.0))
             visible[p_idx[~blocked], q_idx[~blocked]] = True
         visible |= visible.T
-        coverage = cls._coverage(patches, caster, hemisphere_rays, offset_m, seed, openings)
+        coverage = cls._coverage(patches, caster, hemisphere_rays, pts, seed, openings)
+        coverage[covered] = 1.0
         return cls.from_visibility(patches, visible, coverage)
 
     @staticmethod
-    def _coverage(patches: Patches, caster: RayCaster, n: int, offset_m: float, seed: int,
+    def _coverage(patches: Patches, caster: RayCaster, n: int, pts: NDArray[np.float64], seed: int,
                   openings: NDArray[np.float64] | None = None) -> NDArray[np.float64]:
         if n <= 0:
             return np.ones(patches.count)
         rng = np.random.default_rng(seed)
         dirs = _cosine_hemisphere(patches.normal, n, rng)  # (P, n, 3)
-        origins = np.broadcast_to((patches.sample_point_m + offset_m * patches.normal)[:, None, :], dirs.shape)
+        origins = np.broadcast_to(pts[:, None, :], dirs.shape)
         hits = caster.intersect(origins, dirs).hit.copy()
         if openings is not None and len(openings):
             esc = ~hits
@@ -188,6 +202,19 @@ class PatchTransport:
             scale = np.where(sums > 0, coverage / np.where(sums > 0, sums, 1.0), 0.0)
             gather *= scale[:, None].astype(np.float32)
         return cls(visible=visible, coverage=np.asarray(coverage, dtype=np.float64), gather=gather)
+
+
+def patch_ray_origins(mesh: ReflectanceMesh, patches: Patches, *, offset_m: float) -> RayOrigins:
+    """Junction-safe origins of the patches' rays, relative to their sample points (the centroid of one of their
+    faces, :mod:`lightfast.daylight.ray_origins`)."""
+    fc = mesh.vertices_m[mesh.faces].mean(axis=1)
+    d2 = np.sum((fc - patches.sample_point_m[patches.face_patch]) ** 2, axis=1)
+    order = np.lexsort((d2, patches.face_patch))
+    first = np.ones(len(order), dtype=bool)
+    first[1:] = patches.face_patch[order][1:] != patches.face_patch[order][:-1]
+    sample_face = np.empty(patches.count, dtype=np.int64)
+    sample_face[patches.face_patch[order][first]] = order[first]
+    return point_ray_origins(mesh, patches.sample_point_m, sample_face, offset_m=offset_m, normals=patches.normal)
 
 
 def _upper(rows: slice, cols: slice) -> NDArray[np.bool_]:

@@ -96,7 +96,8 @@ class SunUpdate:
             sl = self._blocks[self._index]
             if self.sun_visible:
                 e = direct_irradiance(lmap.mesh, lmap.caster, self.lights, vertices=sl,
-                                      offset_m=lmap.config.ray_offset_m, openings=lmap.openings)
+                                      offset_m=lmap.config.ray_offset_m, openings=lmap.openings,
+                                      origins=lmap.ray_origins)
                 self._direct[sl] = e
                 self._patch_direct += lmap.patches.vertex_to_patch[:, sl] @ e
             self._index += 1
@@ -171,6 +172,7 @@ class SunUpdatePipeline:
     def __init__(self, lmap: LightingMap, config: SunUpdateConfig, *, site: Site | None = None) -> None:
         self.lmap = lmap
         _ = lmap.transport  # build it now (a loaded map builds it lazily), not inside the first bounded step
+        _ = lmap.ray_origins
         self.config = config
         self.site = site or lmap.site
         self.current: SunUpdate | None = None

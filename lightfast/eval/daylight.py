@@ -41,6 +41,7 @@ from numpy.typing import NDArray
 from lightfast.bag.reader import open_bag
 from lightfast.camera import PinholeCamera
 from lightfast.daylight.crf import load_crf
+from lightfast.daylight.lighting_map import FORMAT_VERSION as MAP_FORMAT_VERSION
 from lightfast.daylight.lighting_map import LightingMap, LightingMapConfig
 from lightfast.daylight.relight import DaylightRelighter, RelightConfig
 from lightfast.daylight.sun import sun_position
@@ -208,6 +209,7 @@ def run_sequence(seq_dir: Path, lmap: LightingMap, method: str, *, max_frames: i
 def _lighting_map(scene: str, sim_dir: Path, maps_dir: Path, progress: bool,
                   config: LightingMapConfig | None = None) -> LightingMap:
     """The scene's lighting map, prepared once into ``maps_dir/<scene>`` (reused while the mesh is unchanged)."""
+    from lightfast.daylight.errors import LightingMapVersionError
     from lightfast.daylight.lighting_map import prepare_lighting_map
     from lightfast.daylight.mesh import load_ply
     from lightfast.daylight.openings import load_openings, openings_array
@@ -217,8 +219,14 @@ def _lighting_map(scene: str, sim_dir: Path, maps_dir: Path, progress: bool,
     mesh_path, site_path = sim_dir / "scenes" / f"{scene}.map.ply", sim_dir / "scenes" / f"{scene}.site.yaml"
     openings_path = sim_dir / "scenes" / f"{scene}.openings.yaml"
     openings = load_openings(openings_path) if openings_path.exists() else ()
+    stale = False
     if out.exists():
-        lmap = LightingMap.load(out)
+        try:
+            lmap = LightingMap.load(out)
+        except LightingMapVersionError as exc:  # made by an older lightfast: prepare it again below
+            log.warning("%s; preparing it again", exc)
+            stale = True
+    if out.exists() and not stale:
         if lmap.mesh.content_hash != load_ply(mesh_path).content_hash:
             raise DaylightEvalError(f"{out} was prepared for another {scene} mesh; remove it to prepare it again")
         if not np.array_equal(lmap.openings, openings_array(openings)):
@@ -228,7 +236,7 @@ def _lighting_map(scene: str, sim_dir: Path, maps_dir: Path, progress: bool,
     log.info("preparing the lighting map of %s into %s", scene, out)
     lmap = prepare_lighting_map(load_ply(mesh_path), Site.from_yaml(site_path), config or LightingMapConfig(),
                                 openings=openings, progress=progress)
-    lmap.save(out)
+    lmap.save(out, overwrite=stale)
     return lmap
 
 
@@ -373,7 +381,9 @@ def evaluate_daylight(sim_dir: Path, out_dir: Path, *, methods: Sequence[str] = 
     cfg_dict = None if map_config is None else dataclasses.asdict(map_config)
     map_meta = {}
     for scene in dict.fromkeys(_scene_of(s) for s in seq_dirs):
-        if not (maps_dir / scene).exists():  # prepare once, before the workers load (and check) it
+        meta_path = maps_dir / scene / "metadata.json"
+        current = meta_path.exists() and json.loads(meta_path.read_text()).get("version") == MAP_FORMAT_VERSION
+        if not current:  # prepare once (or again, if an older lightfast made it) before the workers load it
             _lighting_map(scene, sim_dir, maps_dir, progress, map_config)
         map_meta[scene] = json.loads((maps_dir / scene / "metadata.json").read_text())
     runs: list[SequenceRun] = []
@@ -431,7 +441,7 @@ def _run_key(seq_dir: Path, method: str, map_meta: dict, max_frames: int | None)
         "protocol": PROTOCOL_VERSION,
         "recording": content_digest(seq_dir),  # every file: another seed or simulator version is another input
         "code": code_version(*CODE),
-        "map": {k: map_meta.get(k) for k in ("mesh_sha256", "config", "site", "format_version")},
+        "map": {k: map_meta.get(k) for k in ("mesh_sha256", "config", "site", "version")},
         "method": method,
         "tracker": dataclasses.asdict(TrackerConfig(mode=METHODS[method][0])),
         "relight": dataclasses.asdict(RelightConfig(reference=reference, method=brightness)),

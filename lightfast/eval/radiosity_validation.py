@@ -14,6 +14,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from lightfast.daylight.lighting_map import LightingMap, LightingMapConfig, prepare_lighting_map
 from lightfast.daylight.mesh import ReflectanceMesh
+from lightfast.daylight.proximity import closest_surface_points
 
 if TYPE_CHECKING:
     from lightfast.sim.radiance_oracle import Component
@@ -41,17 +42,12 @@ class Agreement:
 
 def irradiance_at_points(lmap: LightingMap, radiosity: NDArray[np.float32], points_m: ArrayLike,
                          normals: ArrayLike) -> NDArray[np.float64]:
-    """Irradiance ``B̂/ρ`` interpolated at surface points (each found by a short ray back onto the surface)."""
-    p = np.asarray(points_m, dtype=np.float64)
-    n = np.asarray(normals, dtype=np.float64)
-    hits = lmap.caster.intersect(p + 1e-3 * n, -n, t_far_m=0.01)
-    if not np.all(hits.hit):
-        raise ValueError(f"{int(np.sum(~hits.hit))} points are not on the mesh surface")
+    """Irradiance ``B̂/ρ`` interpolated at surface points: barycentric on the closest triangle (within 1 cm)
+    facing the point's normal, so points on open mesh edges are fine (:class:`MeshError`, a ``ValueError``, for
+    points off the surface)."""
     mesh = lmap.mesh
     e_v = radiosity / np.maximum(mesh.reflectance, 1e-6)
-    f = mesh.faces[hits.triangle_id]
-    u, v = hits.barycentric_uv[:, :1].astype(np.float64), hits.barycentric_uv[:, 1:].astype(np.float64)
-    return (1 - u - v) * e_v[f[:, 0]] + u * e_v[f[:, 1]] + v * e_v[f[:, 2]]
+    return closest_surface_points(mesh, points_m, normals, max_distance_m=0.01).interpolate(mesh, e_v)
 
 
 #: The sun through a south window, 35° up and 20° west of south (map = ENU).

@@ -130,7 +130,11 @@ def test_crf_fit_recovers_scales_despite_saturation(scene, true_crf):
     assert saturating.tolist() == [True, True, False]  # blue stays below 255 with this reflectance and sun
     assert np.all(lin.scales[0, saturating] < 0.9 * S_TRUE[0, saturating])
     assert np.all(lin.rms_px[saturating] > 5 * fit.rms_px[saturating])
-    np.testing.assert_allclose(lin.scales[:, 2], S_TRUE[:, 2], rtol=0.01)  # no saturation, no bias
+    # no saturation, no bias: exact on the unquantized image; on the quantized one within the crf fit's tolerances
+    # (the ground image is nearly collinear with the sky one here)
+    np.testing.assert_allclose(fit_scales(exact, ri, true_crf, method="lin").scales[:, 2], S_TRUE[:, 2], rtol=1e-3)
+    np.testing.assert_allclose(lin.scales[:2, 2], S_TRUE[:2, 2], rtol=0.02)
+    np.testing.assert_allclose(lin.scales[2, 2], S_TRUE[2, 2], rtol=0.05)
     # the predicted sun-lit brightness: E_lin is darker
     B_true = sum(S_TRUE[i] * ri.images[n] for i, n in enumerate(COMPONENTS))
     B_lin = sum(lin.scales[i] * ri.images[n] for i, n in enumerate(COMPONENTS))

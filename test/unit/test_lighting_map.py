@@ -7,8 +7,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from lightfast.daylight.errors import LightingMapError, MeshError, SiteError
-from lightfast.daylight.lighting_map import LightingMap, LightingMapConfig, prepare_lighting_map
+from lightfast.daylight.errors import LightingMapError, LightingMapVersionError, MeshError, SiteError
+from lightfast.daylight.lighting_map import FORMAT_VERSION, LightingMap, LightingMapConfig, prepare_lighting_map
 from lightfast.daylight.mesh import ReflectanceMesh, as_mesh, load_ply, save_ply
 from lightfast.daylight.sun import FREIBURG, Site
 from lightfast.sim.validation_rooms import box_room_with_window
@@ -26,7 +26,7 @@ def test_save_load_round_trip(tiny_lighting_map: Path) -> None:
     assert lmap.site == FREIBURG
     assert lmap.sky_radiosity.shape == (lmap.num_vertices, 3) and lmap.sky_radiosity.max() > 0
     meta = json.loads((tiny_lighting_map / "metadata.json").read_text())
-    assert meta["mesh_sha256"] == lmap.mesh.content_hash and meta["version"] == 1
+    assert meta["mesh_sha256"] == lmap.mesh.content_hash and meta["version"] == FORMAT_VERSION == 2
 
 
 def test_fresh_prepare_equals_loaded(tmp_path: Path) -> None:
@@ -34,6 +34,38 @@ def test_fresh_prepare_equals_loaded(tmp_path: Path) -> None:
     loaded = LightingMap.load(lmap.save(tmp_path / "m"))
     np.testing.assert_allclose(loaded.transport.gather, lmap.transport.gather, rtol=1e-6)
     np.testing.assert_allclose(loaded.ground_radiosity, lmap.ground_radiosity)
+
+
+def test_maps_keep_their_normals(tmp_path: Path) -> None:
+    """Smoothed input normals (tilted 20° off the faces) survive saving: the loaded map's sun radiosity, computed
+    after loading, uses the same normals as the sky and ground radiosity computed while preparing."""
+    from lightfast.daylight.sun_update import sun_radiosity
+
+    box = closed_box(n=4)
+    tilt = np.array([np.sin(np.radians(20)), 0.0, 0.0])
+    smooth = box.vertex_normals + tilt
+    mesh = ReflectanceMesh(box.vertices_m, box.faces, box.reflectance, smooth)
+    lmap = prepare_lighting_map(mesh, FREIBURG, CONFIG)
+    loaded = LightingMap.load(lmap.save(tmp_path / "m"))
+    np.testing.assert_array_equal(loaded.mesh.vertex_normals, lmap.mesh.vertex_normals)
+    assert not np.allclose(loaded.mesh.vertex_normals, box.vertex_normals, atol=0.1)  # not recomputed from faces
+    np.testing.assert_array_equal(loaded.ray_origins.offset_m, lmap.ray_origins.offset_m)
+    np.testing.assert_array_equal(loaded.ray_origins.covered, lmap.ray_origins.covered)
+    sun = np.array([0.3, -0.5, 0.81]) / np.linalg.norm([0.3, -0.5, 0.81])
+    np.testing.assert_array_equal(sun_radiosity(loaded, sun), sun_radiosity(lmap, sun))
+
+
+def test_a_map_of_an_older_format_is_refused_with_one_line(tiny_lighting_map: Path, tmp_path: Path) -> None:
+    old = copy_map(tiny_lighting_map, tmp_path / "v1")
+    meta = json.loads((old / "metadata.json").read_text())
+    meta["version"] = 1
+    (old / "metadata.json").write_text(json.dumps(meta))
+    with pytest.raises(LightingMapVersionError) as info:
+        LightingMap.load(old)
+    message = str(info.value)
+    assert "\n" not in message and "format version 1 is not supported" in message
+    assert f"reads version {FORMAT_VERSION}" in message and "lightfast daylight prepare" in message
+    assert isinstance(info.value, LightingMapError)
 
 
 def copy_map(src: Path, dst: Path) -> Path:
@@ -166,3 +198,22 @@ def test_prepare_cli(tmp_path: Path) -> None:
     sun = run_bounded([*LIGHTFAST, "daylight", "sun", str(site), "--time", "2021-03-20T11:36:00+00:00"],
                       timeout_s=60)
     assert sun.returncode == 0 and "azimuth 179.99" in sun.stdout and "elevation 42.04" in sun.stdout
+
+
+def test_the_evaluation_prepares_an_outdated_map_again(tmp_path: Path) -> None:
+    """`lightfast eval daylight` keeps its maps in maps_dir/<scene>: one made by an older lightfast (format
+    version) is prepared again instead of stopping the evaluation."""
+    from lightfast.eval.daylight import _lighting_map
+
+    scenes = tmp_path / "sim" / "scenes"
+    scenes.mkdir(parents=True)
+    save_ply(closed_box(n=3), scenes / "S.map.ply")
+    FREIBURG.to_yaml(scenes / "S.site.yaml")
+    maps = tmp_path / "maps"
+    first = _lighting_map("S", tmp_path / "sim", maps, False, CONFIG)
+    meta = json.loads((maps / "S" / "metadata.json").read_text())
+    meta["version"] = 1
+    (maps / "S" / "metadata.json").write_text(json.dumps(meta))
+    again = _lighting_map("S", tmp_path / "sim", maps, False, CONFIG)
+    assert json.loads((maps / "S" / "metadata.json").read_text())["version"] == FORMAT_VERSION
+    np.testing.assert_allclose(again.sky_radiosity, first.sky_radiosity)
