@@ -42,6 +42,7 @@ from rosbags.rosbag2 import StoragePlugin, Writer  # noqa: E402
 
 from lightfast.bag import BagWriter, default_typestore, open_bag  # noqa: E402
 from lightfast.data.sevenscenes import SevenScenes  # noqa: E402
+from lightfast.data.shared import shared_root  # noqa: E402
 from lightfast.io import write_text_atomic  # noqa: E402
 from lightfast.ros.convert import numpy_to_image  # noqa: E402
 from lightfast.ros.msgtypes import rosbags_types  # noqa: E402
@@ -141,7 +142,8 @@ def run_variant(tmp: Path, messages: list[Message], compression: str, writer: Ca
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--shared", type=Path, default=ROOT.parent / "shared")
+    parser.add_argument("--shared", type=Path, default=shared_root(),
+                        help="the shared folder holding data/ (default: $LIGHTFAST_SHARED, else ../shared)")
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results" / "bag_compression")
     args = parser.parse_args()

@@ -39,6 +39,7 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
 
 from lightfast.bag import open_bag  # noqa: E402
 from lightfast.data.sevenscenes import convert_7scenes  # noqa: E402
+from lightfast.data.shared import shared_root  # noqa: E402
 from lightfast.io import write_text_atomic  # noqa: E402
 from lightfast.ros.domain import reserve_domain_id  # noqa: E402
 from lightfast.ros.runtime import message_class  # noqa: E402
@@ -102,7 +103,8 @@ def run_once(bag: Path, rate: float, domain_id: int, topics: dict[str, str], tot
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--bag", type=Path, help="7-Scenes bag (default: converted into a temp dir)")
-    parser.add_argument("--shared", type=Path, default=ROOT.parent / "shared")
+    parser.add_argument("--shared", type=Path, default=shared_root(),
+                        help="the shared folder holding data/ (default: $LIGHTFAST_SHARED, else ../shared)")
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results" / "bag_play")
     args = parser.parse_args()

@@ -45,6 +45,7 @@ from scipy.spatial import cKDTree
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
+from lightfast.data.shared import shared_data_dir  # noqa: E402
 from lightfast.geometry import project_to_so3, rotation_angle_deg, so3_exp  # noqa: E402
 from lightfast.io import write_text_atomic  # noqa: E402
 from lightfast.racr import (  # noqa: E402
@@ -62,7 +63,7 @@ from test.unit.racr.test_fast_alignment import (  # noqa: E402  (the tests' cold
     _seeded_start,
 )
 
-DATA = ROOT.parent / "shared" / "data" / "3dmatch_redkitchen_pair"
+DATA = shared_data_dir("3dmatch_redkitchen_pair")  # $LIGHTFAST_SHARED/data or ../shared/data, read in place
 R_TRUE = so3_exp(np.array([0.3, -0.5, 0.2]))
 T_TRUE_M = np.array([0.4, -0.2, 1.0])
 PEER_COARSE_M = 0.1  # Open3D's first correspondence distance from the held-out starts (0.02 m alone: lost)

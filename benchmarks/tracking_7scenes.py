@@ -1,7 +1,10 @@
 """Benchmark frame-to-frame RGB-D tracking (paper §III-D, Eq. 7) on 7-Scenes, against Open3D's hybrid odometry.
 
-For frames ``--first``..``--last`` of ``/work/shared/data/7scenes_redkitchen_300``, at 640×480 and 320×240, in the
-same run:
+For frames ``--first``..``--last`` (frame numbers, as in ``frame-NNNNNN``; default all) of a 7-Scenes sequence
+folder (``--data``, default ``7scenes_redkitchen_300`` in the shared data: ``$LIGHTFAST_SHARED/data`` or
+``../shared/data``; any folder of ``frame-NNNNNN.color.{png,jpg}`` / ``.depth.png`` / ``.pose.txt`` whose numbers
+start anywhere, with the 7-Scenes intrinsics when it has no ``camera-intrinsics.txt``), at 640×480 and 320×240, in
+the same run:
 
 * **lightfast Eq. 7** — :func:`lightfast.tracking.track_sequence` (photometric + w_G·point-to-plane, w_G = 10,
   Huber, 3-level pyramid) and its depth-only variant (E_C off) at 320×240;
@@ -21,21 +24,33 @@ v1's colour and depth cameras are not registered in 7-Scenes (PROVENANCE.md).
 Each chained trajectory is compared with the ground truth by ATE RMSE after a rigid Umeyama alignment
 (:func:`lightfast.tracking.ate_rmse`), by the mean ATE of 100-frame windows, by the drift over 1 s (RMSE of the
 translation error of 30-frame motions) and by the median frame-to-frame error (RPE);
-time per frame includes the image pyramid / tensor preparation. Prints a
-markdown table and writes it atomically to ``--output`` (default ``benchmarks/results/tracking_7scenes.md``).
+time per frame includes the image pyramid / tensor preparation; lightfast's alignments that did not converge
+(``AlignResult.converged``) and Open3D legacy's failed steps are counted.
 
-Usage: ``.venv/bin/python benchmarks/tracking_7scenes.py [--first 0] [--last 299]``
+Sub-sequences: the frames cut into consecutive stretches of ``--subsequence`` frames (default 150; a shorter rest
+is dropped), each tracked on its own by Open3D's two APIs and lightfast's f2f at both resolutions; the table gives
+each stretch's ATE and their mean, the verdict whether lightfast's f2f is ahead of both Open3D APIs on that mean.
+
+Prints markdown and writes it atomically to ``--output`` (default ``benchmarks/results/tracking_7scenes.md``), the
+sub-sequence numbers beside it as JSON (same name, ``.json``).
+
+Usage: ``.venv/bin/python benchmarks/tracking_7scenes.py [--data DIR] [--first N] [--last M] [--subsequence 150]
+[--no-main] [--no-orderings]``
 """
 from __future__ import annotations
 
 import argparse
 import functools
+import itertools
+import json
 import math
 import platform
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
+from typing import Any, cast
 
 import cv2
 import numpy as np
@@ -43,20 +58,67 @@ import open3d as o3d
 from numpy.typing import NDArray
 
 from lightfast.camera import PinholeCamera
+from lightfast.data.errors import DatasetError
 from lightfast.data.sevenscenes import SevenScenes, colour_offset, shift_colour
+from lightfast.data.shared import shared_data_dir, shown_path
 from lightfast.io import write_text_atomic
 from lightfast.tracking import TrackingConfig, ate_rmse, track_sequence
 
-DATA = Path("/work/shared/data/7scenes_redkitchen_300")
+DATA_NAME = "7scenes_redkitchen_300"
 Frames = list[tuple[NDArray[np.uint8], NDArray[np.float64]]]
 #: lightfast with the depth-difference geometric term (Kerl et al.; Open3D's form) at the weight ratio of Open3D's
 #: legacy defaults, lambda_dep / lambda_img = 0.968 / 0.032 ~ 30 (not tuned here).
 DEPTH_DIFF = "lightfast E_C + 30 E_G, depth-difference E_G"
 DEPTH_DIFF_CFG = functools.partial(TrackingConfig, geometric_term="depth-difference", geometric_weight=30.0)
+EQ7 = "lightfast Eq. 7 (E_C + 10 E_G)"
+O3D_TENSOR = "Open3D hybrid (defaults)"
+O3D_LEGACY = "Open3D legacy hybrid (defaults)"
 
 
-def _o3d_track(frames: Frames, cam: PinholeCamera, *, w_G: float | None, constant_velocity: bool = True
-               ) -> tuple[NDArray[np.float64], float]:
+@dataclass(frozen=True)
+class Track:
+    """A chained trajectory (``T_world_cam`` per frame), ms per aligned frame and the failed alignments: lightfast's
+    not converged, Open3D legacy's unsuccessful steps; None where the API does not say (Open3D tensor)."""
+
+    poses: NDArray[np.float64]
+    ms: float
+    failed: int | None
+
+
+@dataclass(frozen=True)
+class Sequence7:
+    """Frames of one 7-Scenes folder: ``numbers`` (file numbers), full-size and 320×240 frames (rgb, depth m),
+    ground truth ``T_world_cam``, both cameras, and every 20th frame's raw (rgb, depth mm) for the colour offset."""
+
+    data: Path
+    numbers: list[int]
+    frames: Frames
+    small: Frames
+    gt: NDArray[np.float64]
+    cam: PinholeCamera
+    small_cam: PinholeCamera
+    raw_sparse: list[tuple[NDArray[np.uint8], NDArray[np.uint16]]]
+    intrinsics_file: bool
+
+
+def load_sequence(data: Path, first: int | None = None, last: int | None = None) -> Sequence7:
+    """Frames numbered ``first``..``last`` (inclusive; None: from the first / to the last present) of ``data``."""
+    try:
+        ds = SevenScenes(data)
+    except DatasetError as exc:
+        raise SystemExit(f"tracking_7scenes: {exc} (set --data, or LIGHTFAST_SHARED for the shared data)") from None
+    numbers = [i for i in ds.indices if (first is None or i >= first) and (last is None or i <= last)]
+    if len(numbers) < 2:
+        raise SystemExit(f"tracking_7scenes: frames {first}..{last} of {data}: {len(numbers)} frame(s); the folder "
+                         f"holds {len(ds.indices)} numbered {ds.indices[0]}..{ds.indices[-1]}")
+    raw = [ds.frame(i) for i in numbers]
+    frames: Frames = [(f.rgb, f.depth_mm.astype(np.float64) / 1000.0) for f in raw]
+    small, small_cam = _resize(frames, ds.camera)
+    return Sequence7(data, numbers, frames, small, np.stack([f.T_world_cam for f in raw]), ds.camera, small_cam,
+                     [(f.rgb, f.depth_mm) for f in raw[::20]], ds.intrinsics_file)
+
+
+def _o3d_track(frames: Frames, cam: PinholeCamera, *, w_G: float | None, constant_velocity: bool = True) -> Track:
     """Chain Open3D hybrid f2f odometry; ``w_G`` None = all defaults, else the depth-scaling emulation."""
     odo = o3d.t.pipelines.odometry
     s = 1.0 if w_G is None else math.sqrt(w_G / 1.0)  # Open3D weighs both terms 0.5: ratio 1 -> s² = w_G
@@ -85,16 +147,16 @@ def _o3d_track(frames: Frames, cam: PinholeCamera, *, w_G: float | None, constan
             poses.append(poses[-1] @ T)
             seconds += time.perf_counter() - t0
         prev = img
-    return np.stack(poses), 1000.0 * seconds / max(len(frames) - 1, 1)
+    return Track(np.stack(poses), 1000.0 * seconds / max(len(frames) - 1, 1), None)
 
 
-def _o3d_legacy_track(frames: Frames, cam: PinholeCamera) -> tuple[NDArray[np.float64], float]:
+def _o3d_legacy_track(frames: Frames, cam: PinholeCamera) -> Track:
     """Chain Open3D's legacy hybrid odometry (default options), each step started at the constant-velocity
     prediction; a failed step keeps the prediction."""
     odo = o3d.pipelines.odometry
     intrinsic = o3d.camera.PinholeCameraIntrinsic(cam.width, cam.height, cam.fx, cam.fy, cam.cx, cam.cy)
     option, jacobian = odo.OdometryOption(), odo.RGBDOdometryJacobianFromHybridTerm()
-    velocity, poses, prev, seconds = np.eye(4), [np.eye(4)], None, 0.0
+    velocity, poses, prev, seconds, failed = np.eye(4), [np.eye(4)], None, 0.0, 0
     for rgb, depth in frames:
         t0 = time.perf_counter()
         img = o3d.geometry.RGBDImage.create_from_color_and_depth(
@@ -105,16 +167,17 @@ def _o3d_legacy_track(frames: Frames, cam: PinholeCamera) -> tuple[NDArray[np.fl
         if prev is not None:
             ok, T, _ = odo.compute_rgbd_odometry(img, prev, intrinsic, velocity, jacobian, option)
             velocity = T if ok else velocity
+            failed += not ok
             poses.append(poses[-1] @ velocity)
             seconds += time.perf_counter() - t0
         prev = img
-    return np.stack(poses), 1000.0 * seconds / max(len(frames) - 1, 1)
+    return Track(np.stack(poses), 1000.0 * seconds / max(len(frames) - 1, 1), failed)
 
 
-def _lf_track(frames: Frames, cam: PinholeCamera, cfg: TrackingConfig, constant_velocity: bool = True
-              ) -> tuple[NDArray[np.float64], float]:
+def _lf_track(frames: Frames, cam: PinholeCamera, cfg: TrackingConfig, constant_velocity: bool = True) -> Track:
     track = track_sequence(frames, cam, config=cfg, constant_velocity=constant_velocity)
-    return track.poses, 1000.0 * float(np.mean(track.seconds))
+    return Track(track.poses, 1000.0 * float(np.mean(track.seconds)),
+                 sum(not r.converged for r in track.results))
 
 
 def _rpe(poses: NDArray[np.float64], gt: NDArray[np.float64]) -> tuple[float, float]:
@@ -129,7 +192,9 @@ def _rpe(poses: NDArray[np.float64], gt: NDArray[np.float64]) -> tuple[float, fl
 
 def _drift_mm(poses: NDArray[np.float64], gt: NDArray[np.float64], delta: int = 30) -> float:
     """RMSE (mm) of the translation error of the motions over ``delta`` frames (30 = 1 s at 30 Hz): the drift
-    rate, the TUM RPE over 1 s."""
+    rate, the TUM RPE over 1 s; NaN for a sequence not longer than ``delta``."""
+    if len(poses) <= delta:
+        return math.nan
     est = np.linalg.inv(poses[:-delta]) @ poses[delta:]
     true = np.linalg.inv(gt[:-delta]) @ gt[delta:]
     err = np.linalg.inv(true) @ est
@@ -139,8 +204,11 @@ def _drift_mm(poses: NDArray[np.float64], gt: NDArray[np.float64], delta: int = 
 def _windowed_ate_cm(poses: NDArray[np.float64], gt: NDArray[np.float64], window: int = 100, step: int = 25
                      ) -> float:
     """Mean ATE RMSE (cm) over the ``window``-frame stretches starting every ``step`` frames, each aligned on its
-    own: the same accumulation as the whole-sequence ATE, less dominated by how one run's drift directions add up."""
+    own: the same accumulation as the whole-sequence ATE, less dominated by how one run's drift directions add up
+    (NaN for a sequence shorter than ``window``)."""
     starts = range(0, len(poses) - window + 1, step)
+    if not starts:
+        return math.nan
     return 100.0 * float(np.mean([ate_rmse(poses[s:s + window], gt[s:s + window]) for s in starts]))
 
 
@@ -158,97 +226,193 @@ def _orderings(n: int) -> dict[str, list[int]]:
 
 
 def _resize(frames: Frames, cam: PinholeCamera) -> tuple[Frames, PinholeCamera]:
-    """320×240 input for Open3D (lightfast downsamples internally with ``resolution_scale``)."""
+    """Half-size input for Open3D (lightfast downsamples internally with ``resolution_scale``)."""
     small = cam.scaled(0.5)
-    out = [
+    out: Frames = [
         (
-            cv2.resize(rgb, (small.width, small.height), interpolation=cv2.INTER_AREA),
-            cv2.resize(d, (small.width, small.height), interpolation=cv2.INTER_NEAREST),
+            cast(NDArray[np.uint8], cv2.resize(rgb, (small.width, small.height), interpolation=cv2.INTER_AREA)),
+            cast(NDArray[np.float64], cv2.resize(d, (small.width, small.height), interpolation=cv2.INTER_NEAREST)),
         )
         for rgb, d in frames
     ]
     return out, small
 
 
-def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--first", type=int, default=0)
-    ap.add_argument("--last", type=int, default=299)
+def _size(cam: PinholeCamera) -> str:
+    return f"{cam.width}×{cam.height}"
+
+
+#: (method, full / half size, tracker of the frames at the positions given) for the sub-sequence table
+SubTracker = tuple[str, bool, Callable[[Sequence7, Sequence[int]], Track]]
+
+
+def sub_trackers() -> list[SubTracker]:
+    """Open3D's two APIs and lightfast's two f2f variants, each at full and half size (all defaults)."""
+    def pick(frames: Frames, ix: Sequence[int]) -> Frames:
+        return [frames[i] for i in ix]
+
+    return [
+        (O3D_TENSOR, True, lambda s, ix: _o3d_track(pick(s.frames, ix), s.cam, w_G=None)),
+        (O3D_TENSOR, False, lambda s, ix: _o3d_track(pick(s.small, ix), s.small_cam, w_G=None)),
+        (O3D_LEGACY, True, lambda s, ix: _o3d_legacy_track(pick(s.frames, ix), s.cam)),
+        (O3D_LEGACY, False, lambda s, ix: _o3d_legacy_track(pick(s.small, ix), s.small_cam)),
+        (EQ7, True, lambda s, ix: _lf_track(pick(s.frames, ix), s.cam, TrackingConfig())),
+        (EQ7, False, lambda s, ix: _lf_track(pick(s.frames, ix), s.cam, TrackingConfig(resolution_scale=0.5))),
+        (DEPTH_DIFF, True, lambda s, ix: _lf_track(pick(s.frames, ix), s.cam, DEPTH_DIFF_CFG())),
+        (DEPTH_DIFF, False, lambda s, ix: _lf_track(pick(s.frames, ix), s.cam, DEPTH_DIFF_CFG(resolution_scale=0.5))),
+    ]
+
+
+def subsequences(n: int, length: int) -> list[range]:
+    """Positions of the consecutive stretches of ``length`` frames in ``n`` (a shorter rest is dropped; all frames
+    as one stretch when ``length >= n``)."""
+    if length < 2:
+        raise ValueError(f"a sub-sequence needs at least 2 frames, got {length}")
+    if length >= n:
+        return [range(n)]
+    return [range(a, a + length) for a in range(0, n - length + 1, length)]
+
+
+def evaluate_subsequences(seq: Sequence7, length: int, trackers: list[SubTracker] | None = None
+                          ) -> dict[str, Any]:
+    """Every tracker on every stretch (:func:`subsequences`): per row the ATE (cm), median RPE (mm) and failed
+    alignments of each stretch, their means, and per lightfast row whether its mean ATE is below both Open3D APIs'
+    at the same size (``ahead_of_both``; None without both Open3D rows)."""
+    stretches = subsequences(len(seq.numbers), length)
+    rows: list[dict[str, Any]] = []
+    for name, full, fn in sub_trackers() if trackers is None else trackers:
+        ate, rpe, failed, ms = [], [], [], []
+        for ix in stretches:
+            track = fn(seq, ix)
+            gt = seq.gt[ix.start:ix.stop]
+            ate.append(100.0 * ate_rmse(track.poses, gt))
+            rpe.append(_rpe(track.poses, gt)[0])
+            failed.append(track.failed)
+            ms.append(track.ms)
+        size = _size(seq.cam if full else seq.small_cam)
+        rows.append({"method": name, "resolution": size, "ate_cm": ate, "rpe_mm": rpe, "failed": failed,
+                     "mean_ate_cm": float(np.mean(ate)), "mean_rpe_mm": float(np.mean(rpe)),
+                     "ms_per_frame": float(np.mean(ms))})
+        print(f"{name:45s} {size:8s} sub-sequence ATE " + ", ".join(f"{a:.2f}" for a in ate)
+              + f" cm, mean {rows[-1]['mean_ate_cm']:.2f}; failed {failed}", flush=True)
+    for row in rows:
+        if row["method"].startswith("lightfast"):
+            o3d_means: list[float] = [r["mean_ate_cm"] for r in rows
+                         if r["resolution"] == row["resolution"] and r["method"] in (O3D_TENSOR, O3D_LEGACY)]
+            row["ahead_of_both"] = bool(row["mean_ate_cm"] < min(o3d_means)) if len(o3d_means) == 2 else None
+    return {"length": length, "frames": [seq.numbers[0], seq.numbers[-1]],
+            "stretches": [[seq.numbers[ix.start], seq.numbers[ix.stop - 1]] for ix in stretches], "rows": rows}
+
+
+def _subsequence_lines(sub: dict[str, Any]) -> list[str]:
+    heads = [f"{a}–{b}" for a, b in sub["stretches"]]
+    verdicts = [f"{r['method']} at {r['resolution']}: mean {r['mean_ate_cm']:.2f} cm, "
+                + ("ahead of both Open3D APIs" if r["ahead_of_both"] else "**not** ahead of both Open3D APIs")
+                for r in sub["rows"] if r.get("ahead_of_both") is not None]
+
+    def failed(r: dict[str, Any]) -> str:
+        return "–" if None in r["failed"] else str(sum(r["failed"]))
+
+    return [
+        "",
+        f"## Sub-sequences of {sub['length']} frames",
+        "",
+        f"Frames {sub['frames'][0]}–{sub['frames'][1]} cut into {len(heads)} consecutive "
+        f"stretch{'es' if len(heads) > 1 else ''} of {sub['length']} frames (a shorter rest left out), each tracked "
+        "on its own from its first frame (constant-velocity start); ATE RMSE [cm] of each stretch after its own rigid "
+        "alignment, mean over the stretches, mean of the stretches' median RPE [mm], failed alignments over all "
+        "stretches (lightfast: `AlignResult.converged` false; Open3D legacy: `compute_rgbd_odometry` unsuccessful; "
+        "Open3D tensor does not report it: –).",
+        "",
+        "| method | resolution | " + " | ".join(heads) + " | mean ATE [cm] | RPE [mm] | failed | ms/frame |",
+        "|---|---|" + "---:|" * (len(heads) + 4),
+        *[f"| {r['method']} | {r['resolution']} | " + " | ".join(f"{a:.2f}" for a in r["ate_cm"])
+          + f" | **{r['mean_ate_cm']:.2f}** | {r['mean_rpe_mm']:.2f} | {failed(r)} | {r['ms_per_frame']:.1f} |"
+          for r in sub["rows"]],
+        "",
+        *[f"- {v}" for v in verdicts],
+    ]
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
+    ap.add_argument("--data", type=Path, default=shared_data_dir(DATA_NAME),
+                    help="a 7-Scenes sequence folder (default: 7scenes_redkitchen_300 in $LIGHTFAST_SHARED/data "
+                    "or ../shared/data)")
+    ap.add_argument("--first", type=int, default=None, help="first frame number (default: the folder's first)")
+    ap.add_argument("--last", type=int, default=None, help="last frame number, inclusive (default: the folder's last)")
+    ap.add_argument("--subsequence", type=int, default=150,
+                    help="frames per sub-sequence of the sub-sequence table (0: no such table)")
+    ap.add_argument("--main", action=argparse.BooleanOptionalAction, default=True,
+                    help="the main table on all frames (every method, colour registration, identity start)")
     ap.add_argument("--repeats", type=int, default=3,
                     help="runs of the headline rows (Open3D tensor and lightfast Eq. 7, raw frames) for the "
                     "repeatability table")
     ap.add_argument("--orderings", action=argparse.BooleanOptionalAction, default=True,
                     help="also track twelve orderings of the same frames (forward / reversed, strides 1-3; ~15 min)")
     ap.add_argument("--output", type=Path, default=Path(__file__).parent / "results" / "tracking_7scenes.md")
-    args = ap.parse_args()
-    ds = SevenScenes(DATA)
-    idx = [i for i in ds.indices if args.first <= i <= args.last]
-    raw = [ds.frame(i) for i in idx]
-    frames: Frames = [(f.rgb, f.depth_mm.astype(np.float64) / 1000.0) for f in raw]
-    gt = np.stack([f.T_world_cam for f in raw])
-    cam = ds.camera
-    small_frames, small_cam = _resize(frames, cam)
+    args = ap.parse_args(argv)
+    seq = load_sequence(args.data, args.first, args.last)
+    frames, small_frames, cam, small_cam, gt = seq.frames, seq.small, seq.cam, seq.small_cam, seq.gt
+    full, half = _size(cam), _size(small_cam)
     for scale in (1.0, 0.5):  # numba compiles on first use (and after a move of the source): not a frame's time
         track_sequence(frames[:2], cam, config=TrackingConfig(resolution_scale=scale))
 
-    runs: list[tuple[str, str, Callable[[], tuple[NDArray[np.float64], float]]]] = [
-        ("Open3D hybrid (defaults)", "640×480", lambda: _o3d_track(frames, cam, w_G=None)),
-        ("Open3D hybrid, w_G=10 via depth scaling", "640×480", lambda: _o3d_track(frames, cam, w_G=10.0)),
-        ("Open3D hybrid (defaults)", "320×240", lambda: _o3d_track(small_frames, small_cam, w_G=None)),
-        ("Open3D legacy hybrid (defaults)", "640×480", lambda: _o3d_legacy_track(frames, cam)),
-        ("Open3D legacy hybrid (defaults)", "320×240", lambda: _o3d_legacy_track(small_frames, small_cam)),
-        (
-            "lightfast Eq. 7 (E_C + 10 E_G)",
-            "320×240",
-            lambda: _lf_track(frames, cam, TrackingConfig(resolution_scale=0.5)),
-        ),
-        (
-            "lightfast depth-only (E_G)",
-            "320×240",
-            lambda: _lf_track(frames, cam, TrackingConfig(resolution_scale=0.5, mode="depth-only")),
-        ),
-        ("lightfast Eq. 7 (E_C + 10 E_G)", "640×480", lambda: _lf_track(frames, cam, TrackingConfig())),
-        (DEPTH_DIFF, "320×240", lambda: _lf_track(frames, cam, DEPTH_DIFF_CFG(resolution_scale=0.5))),
-        (DEPTH_DIFF, "640×480", lambda: _lf_track(frames, cam, DEPTH_DIFF_CFG())),
+    runs: list[tuple[str, str, Callable[[], Track]]] = [
+        (O3D_TENSOR, full, lambda: _o3d_track(frames, cam, w_G=None)),
+        ("Open3D hybrid, w_G=10 via depth scaling", full, lambda: _o3d_track(frames, cam, w_G=10.0)),
+        (O3D_TENSOR, half, lambda: _o3d_track(small_frames, small_cam, w_G=None)),
+        (O3D_LEGACY, full, lambda: _o3d_legacy_track(frames, cam)),
+        (O3D_LEGACY, half, lambda: _o3d_legacy_track(small_frames, small_cam)),
+        (EQ7, half, lambda: _lf_track(frames, cam, TrackingConfig(resolution_scale=0.5))),
+        ("lightfast depth-only (E_G)", half,
+         lambda: _lf_track(frames, cam, TrackingConfig(resolution_scale=0.5, mode="depth-only"))),
+        (EQ7, full, lambda: _lf_track(frames, cam, TrackingConfig())),
+        (DEPTH_DIFF, half, lambda: _lf_track(frames, cam, DEPTH_DIFF_CFG(resolution_scale=0.5))),
+        (DEPTH_DIFF, full, lambda: _lf_track(frames, cam, DEPTH_DIFF_CFG())),
         # the protocol of the earlier runs: every alignment started at identity
-        ("Open3D hybrid (defaults), identity start", "640×480",
+        ("Open3D hybrid (defaults), identity start", full,
          lambda: _o3d_track(frames, cam, w_G=None, constant_velocity=False)),
-        ("Open3D hybrid (defaults), identity start", "320×240",
+        ("Open3D hybrid (defaults), identity start", half,
          lambda: _o3d_track(small_frames, small_cam, w_G=None, constant_velocity=False)),
-        ("lightfast Eq. 7, identity start", "320×240",
+        ("lightfast Eq. 7, identity start", half,
          lambda: _lf_track(frames, cam, TrackingConfig(resolution_scale=0.5), constant_velocity=False)),
-        ("lightfast Eq. 7, identity start", "640×480",
+        ("lightfast Eq. 7, identity start", full,
          lambda: _lf_track(frames, cam, TrackingConfig(), constant_velocity=False)),
-    ]
-    # the Kinect v1's colour and depth cameras are not registered: the same runs on colour shifted by the offset
-    # estimated from the images alone (depth edges vs colour gradients, no poses; lightfast.data.sevenscenes)
-    offset = colour_offset((f.rgb, f.depth_mm) for f in raw[::20])
-    reg = [(shift_colour(rgb, offset), depth) for rgb, depth in frames]
-    small_reg, _ = _resize(reg, cam)
-    tag = f"colour registered ({offset[0]:+d}, {offset[1]:+d}) px"
-    runs += [
-        (f"Open3D hybrid (defaults), {tag}", "640×480", lambda: _o3d_track(reg, cam, w_G=None)),
-        (f"Open3D hybrid (defaults), {tag}", "320×240", lambda: _o3d_track(small_reg, small_cam, w_G=None)),
-        (f"lightfast Eq. 7, {tag}", "320×240", lambda: _lf_track(reg, cam, TrackingConfig(resolution_scale=0.5))),
-        (f"lightfast Eq. 7, {tag}", "640×480", lambda: _lf_track(reg, cam, TrackingConfig())),
-    ]
+    ] if args.main else []
+    if args.main:
+        # the Kinect v1's colour and depth cameras are not registered: the same runs on colour shifted by the offset
+        # estimated from the images alone (depth edges vs colour gradients, no poses; lightfast.data.sevenscenes)
+        offset = colour_offset(seq.raw_sparse)
+        reg = [(shift_colour(rgb, offset), depth) for rgb, depth in frames]
+        small_reg, _ = _resize(reg, cam)
+        tag = f"colour registered ({offset[0]:+d}, {offset[1]:+d}) px"
+        runs += [
+            (f"Open3D hybrid (defaults), {tag}", full, lambda: _o3d_track(reg, cam, w_G=None)),
+            (f"Open3D hybrid (defaults), {tag}", half, lambda: _o3d_track(small_reg, small_cam, w_G=None)),
+            (f"lightfast Eq. 7, {tag}", half, lambda: _lf_track(reg, cam, TrackingConfig(resolution_scale=0.5))),
+            (f"lightfast Eq. 7, {tag}", full, lambda: _lf_track(reg, cam, TrackingConfig())),
+        ]
     rows = []
     ates: dict[tuple[str, str], list[float]] = {}
     for name, res, fn in runs:
-        poses, ms = fn()
+        track = fn()
+        poses = track.poses
         ates[(name, res)] = [100.0 * ate_rmse(poses, gt)]
         rpe_mm, rpe_deg = _rpe(poses, gt)
+        failed = "–" if track.failed is None else str(track.failed)
         rows.append((name, res, ates[(name, res)][0], _windowed_ate_cm(poses, gt), _drift_mm(poses, gt),
-                     rpe_mm, rpe_deg, ms))
+                     rpe_mm, rpe_deg, failed, track.ms))
         print(f"{name:45s} {res:8s} ATE {rows[-1][2]:6.2f} cm (windows {rows[-1][3]:5.2f})  drift "
-              f"{rows[-1][4]:5.1f} mm/s  RPE {rpe_mm:5.2f} mm {rpe_deg:5.3f} deg  {ms:7.1f} ms/frame", flush=True)
+              f"{rows[-1][4]:5.1f} mm/s  RPE {rpe_mm:5.2f} mm {rpe_deg:5.3f} deg  failed {failed}  "
+              f"{track.ms:7.1f} ms/frame", flush=True)
 
     # Open3D's tensor odometry reduces its normal equations in parallel, in no fixed order: the same input does not
     # give the same trajectory twice. The headline rows again, to show how much the whole-sequence ATE moves.
-    headline = [(n, r, fn) for n, r, fn in runs if n in ("Open3D hybrid (defaults)", "lightfast Eq. 7 (E_C + 10 E_G)")]
+    headline = [(n, r, fn) for n, r, fn in runs if n in (O3D_TENSOR, EQ7)]
     for _ in range(args.repeats - 1):
         for name, res, fn in headline:
-            ates[(name, res)].append(100.0 * ate_rmse(fn()[0], gt))
+            ates[(name, res)].append(100.0 * ate_rmse(fn().poses, gt))
             print(f"{name:45s} {res:8s} ATE, repeated: {ates[(name, res)][-1]:6.2f} cm", flush=True)
 
     # the same comparison over twelve orderings of the frames (the first is the table above's sequence)
@@ -256,67 +420,77 @@ def main() -> int:
     if args.orderings:
         orders = _orderings(len(frames))
         trackers: list[tuple[str, str, Callable[[list[int]], NDArray[np.float64]]]] = [
-            ("Open3D hybrid (defaults)", "640×480", lambda ix: _o3d_track([frames[i] for i in ix], cam, w_G=None)[0]),
-            ("Open3D hybrid (defaults)", "320×240",
-             lambda ix: _o3d_track([small_frames[i] for i in ix], small_cam, w_G=None)[0]),
-            ("Open3D legacy hybrid (defaults)", "640×480",
-             lambda ix: _o3d_legacy_track([frames[i] for i in ix], cam)[0]),
-            ("Open3D legacy hybrid (defaults)", "320×240",
-             lambda ix: _o3d_legacy_track([small_frames[i] for i in ix], small_cam)[0]),
-            ("lightfast Eq. 7 (E_C + 10 E_G)", "640×480",
-             lambda ix: _lf_track([frames[i] for i in ix], cam, TrackingConfig())[0]),
-            ("lightfast Eq. 7 (E_C + 10 E_G)", "320×240",
-             lambda ix: _lf_track([frames[i] for i in ix], cam, TrackingConfig(resolution_scale=0.5))[0]),
-            (DEPTH_DIFF, "640×480", lambda ix: _lf_track([frames[i] for i in ix], cam, DEPTH_DIFF_CFG())[0]),
-            (DEPTH_DIFF, "320×240",
-             lambda ix: _lf_track([frames[i] for i in ix], cam, DEPTH_DIFF_CFG(resolution_scale=0.5))[0]),
+            (O3D_TENSOR, full, lambda ix: _o3d_track([frames[i] for i in ix], cam, w_G=None).poses),
+            (O3D_TENSOR, half, lambda ix: _o3d_track([small_frames[i] for i in ix], small_cam, w_G=None).poses),
+            (O3D_LEGACY, full, lambda ix: _o3d_legacy_track([frames[i] for i in ix], cam).poses),
+            (O3D_LEGACY, half, lambda ix: _o3d_legacy_track([small_frames[i] for i in ix], small_cam).poses),
+            (EQ7, full, lambda ix: _lf_track([frames[i] for i in ix], cam, TrackingConfig()).poses),
+            (EQ7, half, lambda ix: _lf_track([frames[i] for i in ix], cam, TrackingConfig(resolution_scale=0.5)).poses),
+            (DEPTH_DIFF, full, lambda ix: _lf_track([frames[i] for i in ix], cam, DEPTH_DIFF_CFG()).poses),
+            (DEPTH_DIFF, half,
+             lambda ix: _lf_track([frames[i] for i in ix], cam, DEPTH_DIFF_CFG(resolution_scale=0.5)).poses),
         ]
-        for name, res, fn in trackers:
-            values = [100.0 * ate_rmse(fn(ix), gt[ix]) for ix in orders.values()]
+        for name, res, order_fn in trackers:
+            values = [100.0 * ate_rmse(order_fn(ix), gt[ix]) for ix in orders.values()]
             order_rows.append((name, res, values))
             print(f"{name:45s} {res:8s} ATE over {len(values)} orderings: mean {np.mean(values):5.2f}, "
                   f"median {np.median(values):5.2f} cm", flush=True)
-    order_lines = [
-        "",
-        f"Orderings: the same frames as {len(order_rows[0][2])} sequences, whole-sequence ATE RMSE [cm] of each. "
-        "Column `k/s`: every k-th frame from frame s (k = 1: 30 Hz, 2: 15 Hz, 3: 10 Hz), `rev`: the same frames "
-        "reversed. The first column is the sequence of the tables above (Open3D tensor runs again, so it may differ "
-        "from them in the second decimal).",
-        "",
-        "| method | resolution | " + " | ".join(_orderings(len(frames))) + " | mean | median |",
-        "|---|---|" + "---:|" * (len(order_rows[0][2]) + 2),
-        *[f"| {n} | {r} | " + " | ".join(f"{a:.2f}" for a in v) + f" | **{np.mean(v):.2f}** | {np.median(v):.2f} |"
-          for n, r, v in order_rows],
-    ] if order_rows else []
+    sub = evaluate_subsequences(seq, args.subsequence) if args.subsequence else None
 
+    numbers = seq.numbers
+    gaps = sum(b - a > 1 for a, b in itertools.pairwise(numbers))
     lines = [
         "# Frame-to-frame RGB-D tracking on 7-Scenes (paper §III-D, Eq. 7)",
         "",
-        f"Frames {idx[0]}–{idx[-1]} of `{DATA.name}` ({len(idx)} frames), chained f2f odometry, each "
-        "alignment started at the constant-velocity prediction (the previous relative motion, as `rgbd_tracker_node` "
-        "does) unless the row says identity start.",
-        "ATE RMSE after rigid (Umeyama) alignment to the ground truth; RPE = median error of the frame-to-frame "
-        "motions (what one f2f alignment gets wrong; ATE adds how those errors accumulate);",
-        "ATE windows = mean ATE RMSE of the 100-frame stretches starting every 25 frames (each aligned on its own); "
-        "drift = RMSE of the translation error of the motions over 30 frames (1 s, the TUM RPE). The whole-sequence "
-        "ATE of chained odometry depends on how one run's small errors happen to add up: two trackers with the same "
-        "per-frame and per-second errors can differ by half a centimetre there, so read it with the other columns;",
-        "ms/frame = wall time per aligned frame (pyramid / tensor preparation included), single process on a shared "
-        "2-core machine.",
-        "",
-        "| method | resolution | ATE RMSE [cm] | ATE windows [cm] | drift [mm/s] | RPE [mm] | RPE [deg] | ms/frame |",
-        "|---|---|---:|---:|---:|---:|---:|---:|",
-        *[f"| {n} | {r} | {a:.2f} | {aw:.2f} | {dr:.1f} | {t:.2f} | {d:.3f} | {m:.1f} |"
-          for n, r, a, aw, dr, t, d, m in rows],
-        "",
-        f"Repeatability: the headline rows run {args.repeats} times on the same frames in this process (Open3D's "
-        "tensor odometry sums its normal equations in parallel in no fixed order, so its trajectory differs from run "
-        "to run; lightfast's Gauss-Newton is deterministic).",
-        "",
-        "| method | resolution | ATE RMSE of each run [cm] |",
-        "|---|---|---|",
-        *[f"| {n} | {r} | {', '.join(f'{a:.2f}' for a in ates[(n, r)])} |" for n, r, _ in headline],
-        *order_lines,
+        f"Frames {numbers[0]}–{numbers[-1]} of `{shown_path(seq.data)}` ({len(numbers)} frames"
+        + (f", {gaps} gaps in the numbering" if gaps else "")
+        + ("" if seq.intrinsics_file else "; no camera-intrinsics.txt: the 7-Scenes intrinsics 585, 585, 320, 240")
+        + "), chained f2f odometry, each alignment started at the constant-velocity prediction (the previous "
+        "relative motion, as `rgbd_tracker_node` does) unless the row says identity start.",
+    ]
+    if rows:
+        lines += [
+            "ATE RMSE after rigid (Umeyama) alignment to the ground truth; RPE = median error of the frame-to-frame "
+            "motions (what one f2f alignment gets wrong; ATE adds how those errors accumulate);",
+            "ATE windows = mean ATE RMSE of the 100-frame stretches starting every 25 frames (each aligned on its "
+            "own); drift = RMSE of the translation error of the motions over 30 frames (1 s, the TUM RPE). The "
+            "whole-sequence ATE of chained odometry depends on how one run's small errors happen to add up: two "
+            "trackers with the same per-frame and per-second errors can differ by half a centimetre there, so read it "
+            "with the other columns; failed = alignments that did not converge (lightfast) or failed (Open3D legacy; "
+            "Open3D tensor does not report it: –);",
+            "ms/frame = wall time per aligned frame (pyramid / tensor preparation included), single process on a "
+            "shared 2-core machine.",
+            "",
+            "| method | resolution | ATE RMSE [cm] | ATE windows [cm] | drift [mm/s] | RPE [mm] | RPE [deg] | failed "
+            "| ms/frame |",
+            "|---|---|---:|---:|---:|---:|---:|---:|---:|",
+            *[f"| {n} | {r} | {a:.2f} | {aw:.2f} | {dr:.1f} | {t:.2f} | {d:.3f} | {f} | {m:.1f} |"
+              for n, r, a, aw, dr, t, d, f, m in rows],
+            "",
+            f"Repeatability: the headline rows run {args.repeats} times on the same frames in this process (Open3D's "
+            "tensor odometry sums its normal equations in parallel in no fixed order, so its trajectory differs from "
+            "run to run; lightfast's Gauss-Newton is deterministic).",
+            "",
+            "| method | resolution | ATE RMSE of each run [cm] |",
+            "|---|---|---|",
+            *[f"| {n} | {r} | {', '.join(f'{a:.2f}' for a in ates[(n, r)])} |" for n, r, _ in headline],
+        ]
+    if order_rows:
+        lines += [
+            "",
+            f"Orderings: the same frames as {len(order_rows[0][2])} sequences, whole-sequence ATE RMSE [cm] of each. "
+            "Column `k/s`: every k-th frame from frame s (k = 1: 30 Hz, 2: 15 Hz, 3: 10 Hz), `rev`: the same frames "
+            "reversed. The first column is the sequence of the tables above (Open3D tensor runs again, so it may "
+            "differ from them in the second decimal).",
+            "",
+            "| method | resolution | " + " | ".join(_orderings(len(frames))) + " | mean | median |",
+            "|---|---|" + "---:|" * (len(order_rows[0][2]) + 2),
+            *[f"| {n} | {r} | " + " | ".join(f"{a:.2f}" for a in v)
+              + f" | **{np.mean(v):.2f}** | {np.median(v):.2f} |" for n, r, v in order_rows],
+        ]
+    if sub is not None:
+        lines += _subsequence_lines(sub)
+    lines += [
         "",
         f"Generated {datetime.now(UTC).isoformat(timespec='seconds')} by `benchmarks/tracking_7scenes.py` "
         f"(Python {platform.python_version()}, NumPy {np.__version__}, Open3D {o3d.__version__}, "
@@ -326,6 +500,9 @@ def main() -> int:
     report = "\n".join(lines)
     print(report)
     write_text_atomic(args.output, report)
+    if sub is not None:
+        summary = {"data": shown_path(seq.data), "first": numbers[0], "last": numbers[-1], "subsequences": sub}
+        write_text_atomic(args.output.with_suffix(".json"), json.dumps(summary, indent=1, ensure_ascii=False) + "\n")
     return 0
 
 

@@ -34,6 +34,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
+from lightfast.data.shared import shown_path  # noqa: E402
 from lightfast.daylight.sun import sun_position  # noqa: E402
 from lightfast.io import write_text_atomic  # noqa: E402
 from lightfast.sim.vtr.build import build_route_scene  # noqa: E402
@@ -127,7 +128,8 @@ def main() -> None:
     lines = [
         "# Simulated route: matches across the day at the same pose, per image source",
         "",
-        f"Scene of `{args.sim_dir}` ({scene.length_m:.0f} m route), left camera at {w}×{h}, {len(positions)} positions "
+        f"Scene of `{shown_path(args.sim_dir)}` ({scene.length_m:.0f} m route), left camera at {w}×{h}, "
+        f"{len(positions)} positions "
         f"every {positions[1] - positions[0]:.0f} m on the centreline; teach light 2014-05-12 10:50 (sun elevation "
         f"{lights['teach'][1]:.0f}°) against the light at the start of each repeat of the default schedule. Mean "
         f"number of correct matches (same pixel ± {CORRECT_PX:.0f} px) per position, of 1000 ORB features per image, "
@@ -154,7 +156,7 @@ def main() -> None:
     print(text)
     write_text_atomic(args.output, text)
     write_text_atomic(args.output.with_suffix(".json"), json.dumps(
-        {"sim_dir": str(args.sim_dir), "size": [w, h], "positions_m": positions.tolist(), "rows": rows,
+        {"sim_dir": shown_path(args.sim_dir), "size": [w, h], "positions_m": positions.tolist(), "rows": rows,
          "teach_sun_elevation_deg": lights["teach"][1]}, indent=1) + "\n")
 
 

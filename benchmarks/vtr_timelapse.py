@@ -47,6 +47,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from lightfast.data.shared import shared_data_dir
 from lightfast.daylight.sun import Site, sun_position
 from lightfast.errors import LightfastError
 from lightfast.io import write_bytes_atomic, write_text_atomic
@@ -71,8 +72,7 @@ _TIME = re.compile(r"^(\d{8}_\d{6})")
 
 
 def default_data() -> Path:
-    shared = os.environ.get("LIGHTFAST_SHARED")
-    return (Path(shared) if shared else ROOT.parent / "shared") / "data" / "webcam_timelapse"
+    return shared_data_dir("webcam_timelapse")
 
 
 def shown(path: str | Path) -> str:

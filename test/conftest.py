@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING
 
 import pytest
 
+from lightfast.data.shared import shared_root
 from lightfast.ros.transport import use_local_transport
 
 if TYPE_CHECKING:  # rclpy is imported lazily so that unit tests never load it
@@ -25,12 +26,12 @@ if TYPE_CHECKING:  # rclpy is imported lazily so that unit tests never load it
 use_local_transport(force=True)  # every participant of the test run uses the loopback-only profile
 
 ROOT = Path(__file__).resolve().parent.parent
-SHARED = Path(os.environ.get("LIGHTFAST_SHARED", ROOT.parent / "shared"))
+SHARED = shared_root()  # $LIGHTFAST_SHARED, else ../shared beside the checkout
 
 
 @pytest.fixture(scope="session")
 def shared_data() -> Path:
-    """``../shared/data`` (read in place, never copied)."""
+    """``../shared/data`` or ``$LIGHTFAST_SHARED/data`` (read in place, never copied)."""
     path = SHARED / "data"
     if not path.is_dir():
         pytest.fail(f"shared data not found at {path}; set LIGHTFAST_SHARED to the shared/ folder")

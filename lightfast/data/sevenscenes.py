@@ -2,7 +2,9 @@
 
 Input (see that folder's PROVENANCE.md): ``frame-NNNNNN.color.jpg`` (640×480 RGB), ``frame-NNNNNN.depth.png``
 (16-bit, millimetres; 0 and 65535 invalid), ``frame-NNNNNN.pose.txt`` (4×4 camera-to-world, metres),
-``camera-intrinsics.txt`` (3×3 K) and optionally ``gravity-direction.txt`` (world-frame gravity).
+``camera-intrinsics.txt`` (3×3 K; the 7-Scenes download has none: then its documented fx = fy = 585,
+(cx, cy) = (320, 240)) and optionally ``gravity-direction.txt`` (world-frame gravity). Frame numbers may start
+anywhere (a sequence's later part alone); ``indices`` lists those present, sorted.
 
 Output topics (one message per frame each, stamped at ``start_ns + i / rate_hz``; 7-Scenes has no timestamps):
 
@@ -59,6 +61,9 @@ log = logging.getLogger(__name__)
 DEFAULT_START_NS = 1_370_088_000 * 10**9
 INVALID_DEPTH_MM = 65535
 _FRAME_RE = re.compile(r"frame-(\d{6})\.color\.(?:jpg|png)$")
+#: The intrinsics the 7-Scenes page gives for all sequences (the KinectFusion defaults of the depth camera), used
+#: when a folder has no ``camera-intrinsics.txt`` (the original download has none).
+SEVENSCENES_K = np.array([[585.0, 0.0, 320.0], [0.0, 585.0, 240.0], [0.0, 0.0, 1.0]])
 
 
 @dataclass(frozen=True)
@@ -73,7 +78,8 @@ class SevenScenesFrame:
 
 
 class SevenScenes:
-    """A folder of 7-Scenes frames."""
+    """A folder of 7-Scenes frames; ``intrinsics_file`` is False where :data:`SEVENSCENES_K` stands in for a
+    missing ``camera-intrinsics.txt``."""
 
     def __init__(self, root: str | os.PathLike[str]) -> None:
         self.root = Path(root)
@@ -82,7 +88,11 @@ class SevenScenes:
         self.indices = sorted(int(m.group(1)) for p in self.root.iterdir() if (m := _FRAME_RE.match(p.name)))
         if not self.indices:
             raise DatasetError(f"{self.root} holds no frame-NNNNNN.color.jpg files")
-        self.K = self._read_matrix(self.root / "camera-intrinsics.txt", (3, 3))
+        k_file = self.root / "camera-intrinsics.txt"
+        self.intrinsics_file = k_file.is_file()
+        self.K = self._read_matrix(k_file, (3, 3)) if self.intrinsics_file else SEVENSCENES_K.copy()
+        if not self.intrinsics_file:
+            log.info("%s has no camera-intrinsics.txt: using the 7-Scenes intrinsics (585, 585, 320, 240)", self.root)
         gravity_file = self.root / "gravity-direction.txt"
         self.T_map_world = np.eye(4)
         if gravity_file.is_file():

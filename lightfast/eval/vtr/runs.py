@@ -31,6 +31,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from lightfast.config import config_from_mapping, replace_config
+from lightfast.data.shared import shown_path
 from lightfast.eval.cache import code_version, content_digest, run_key
 from lightfast.eval.errors import VtrEvalError
 from lightfast.eval.vtr.inputs import SimRun, Truth, load_truth, sim_runs, stereo_frames
@@ -210,7 +211,7 @@ def evaluate_vtr(sim_dir: Path, out_dir: Path, *, modes: Sequence[str] = MODES, 
     runs_dir.mkdir(parents=True, exist_ok=True)
     order = [r.name for r in repeats]
     meta: dict[str, Any] = {
-        "sim_dir": str(sim_dir), "teach": teach.name, "map": str(maps_dir / f"teach-{map_key}"),
+        "sim_dir": shown_path(sim_dir), "teach": teach.name, "map": shown_path(maps_dir / f"teach-{map_key}"),
         "keyframes": len(tmap), "map_length_m": tmap.length_m, "modes": list(modes), "runs": order,
         "config": config.to_dict(), "max_frames": max_frames, "jobs_total": len(repeats) * len(modes),
         "image_size": list(tmap.image_size), "eval_format": EVAL_FORMAT,

@@ -9,10 +9,12 @@ camera, m), ``T = T_target_source``:
   gradient bilinearly interpolated;
 * E_G = Σ ρ_G(r_G), ``r_G = n_t · (q - v_t)`` with the target vertex ``v_t`` and normal ``n_t`` (from the target
   depth by central differences) at ``round(y)`` — point-to-plane with projective association [10], in metres;
-  or, with ``geometric_term="depth-difference"``, ``r_G = D_t(round(y)) - q_z`` with the Jacobian through the
-  target depth's Sobel gradient (the depth term of Kerl et al., ICRA 2013, and of Open3D's hybrid odometry). Not
-  the paper's form, offered for real depth sensors: the normals of Kinect v1 depth (quantised, noisy) make the
-  point-to-plane residual a poor measure there. The simulated daylight recordings keep the paper's form;
+  or, with ``geometric_term="depth-difference"``, ``r_G = D_t(y) - q_z`` with ``D_t`` and its Sobel gradient (the
+  Jacobian) bilinearly interpolated, where all four pixels around ``y`` have a gradient (depth in their 3×3
+  neighbourhood, no discontinuity): the depth term of Kerl et al., ICRA 2013 (Open3D's hybrid odometry reads the
+  nearest pixel, a staircase in ``y`` that Gauss–Newton cycles on; docs/daylight.md). Not the paper's form,
+  offered for real depth sensors: the normals of Kinect v1 depth (quantised, noisy) make the point-to-plane
+  residual a poor measure there. The simulated daylight recordings keep the paper's form;
 * ρ are Huber norms (``intensity_huber_delta``, ``geometric_huber_delta_m``) realised as IRLS weights, the
   geometric one multiplied by w_G.
 
@@ -107,19 +109,24 @@ def _accumulate(
         d_t = geometry[iv, iu, 0]
         if not (d_t > 0.0) or abs(d_t - qz) > trunc:
             continue
-        if use_depth and not np.isfinite(depth_grad[iv, iu, 0] if depth_difference else geometry[iv, iu, 4]):
-            continue
+        u0 = int(u)
+        v0 = int(v)
+        a = u - u0
+        c = v - v0
+        w00 = (1.0 - a) * (1.0 - c)
+        w01 = a * (1.0 - c)
+        w10 = (1.0 - a) * c
+        w11 = a * c
+        if use_depth:
+            if depth_difference:  # the four pixels around y: a gradient (so depth, no discontinuity) at each
+                if not (np.isfinite(depth_grad[v0, u0, 0]) and np.isfinite(depth_grad[v0, u0 + 1, 0])
+                        and np.isfinite(depth_grad[v0 + 1, u0, 0]) and np.isfinite(depth_grad[v0 + 1, u0 + 1, 0])):
+                    continue
+            elif not np.isfinite(geometry[iv, iu, 4]):
+                continue
         count += 1
         inlier = True
         if use_color:
-            u0 = int(u)
-            v0 = int(v)
-            a = u - u0
-            c = v - v0
-            w00 = (1.0 - a) * (1.0 - c)
-            w01 = a * (1.0 - c)
-            w10 = (1.0 - a) * c
-            w11 = a * c
             s0 = (w00 * grey_grad[v0, u0, 0] + w01 * grey_grad[v0, u0 + 1, 0]
                   + w10 * grey_grad[v0 + 1, u0, 0] + w11 * grey_grad[v0 + 1, u0 + 1, 0])
             gu = (w00 * grey_grad[v0, u0, 1] + w01 * grey_grad[v0, u0 + 1, 1]
@@ -138,10 +145,13 @@ def _accumulate(
             cost += c
             inlier &= ok
         if use_depth:
-            if depth_difference:  # r = D_t(round(y)) - q_z; dr/dq = ∇D_t ∂π/∂q - e_z
-                r = d_t - qz
-                ga = depth_grad[iv, iu, 0] * fx * zi
-                gc = depth_grad[iv, iu, 1] * fy * zi
+            if depth_difference:  # r = D_t(y) - q_z (bilinear); dr/dq = ∇D_t ∂π/∂q - e_z
+                r = (w00 * geometry[v0, u0, 0] + w01 * geometry[v0, u0 + 1, 0]
+                     + w10 * geometry[v0 + 1, u0, 0] + w11 * geometry[v0 + 1, u0 + 1, 0]) - qz
+                ga = (w00 * depth_grad[v0, u0, 0] + w01 * depth_grad[v0, u0 + 1, 0]
+                      + w10 * depth_grad[v0 + 1, u0, 0] + w11 * depth_grad[v0 + 1, u0 + 1, 0]) * fx * zi
+                gc = (w00 * depth_grad[v0, u0, 1] + w01 * depth_grad[v0, u0 + 1, 1]
+                      + w10 * depth_grad[v0 + 1, u0, 1] + w11 * depth_grad[v0 + 1, u0 + 1, 1]) * fy * zi
                 J[0], J[1], J[2] = ga, gc, -(ga * qx + gc * qy) * zi - 1.0
             else:  # r = n_t · (q - v_t)
                 nx, ny, nz = geometry[iv, iu, 4], geometry[iv, iu, 5], geometry[iv, iu, 6]
