@@ -62,12 +62,12 @@ def run_racr(work: Path, jobs: int) -> None:
         scenes, out = work / f"racr_scenes_{seed}", work / f"racr_eval_{seed}"
         generate_racr_set(scenes, seed=seed, progress=True, previews=False)
         wanted = {("racr", "varied"), ("racr-serial", "varied"), ("acr", "varied")}
-        evaluate_racr(scenes, out, methods=("racr", "racr-serial", "acr"), lightings=("varied",), jobs=jobs)
+        # each call returns every record of these scenes and this protocol (any method and lighting)
+        recorded = evaluate_racr(scenes, out, methods=("racr", "racr-serial", "acr"), lightings=("varied",), jobs=jobs)
         if seed == RACR_SEEDS[0]:
             wanted.add(("racr", "similar"))
-            evaluate_racr(scenes, out, methods=("racr",), lightings=("similar",), jobs=jobs)
-        got = [r for r in evaluate_racr(scenes, out, methods=(), lightings=(), jobs=jobs)
-               if (r.method, r.lighting) in wanted]
+            recorded = evaluate_racr(scenes, out, methods=("racr",), lightings=("similar",), jobs=jobs)
+        got = [r for r in recorded if (r.method, r.lighting) in wanted]
         runs += got
         by_seed |= {r.key: seed for r in got}
 

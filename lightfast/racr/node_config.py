@@ -90,7 +90,7 @@ class RacrNodeConfig(SensorInputOptions):
     )
 
     def start_session(self, reference: ReferenceObservation, clock: Callable[[], float], *, threaded: bool = True,
-                      session_class: type[RacrSession] = RacrSession) -> RacrSession:
+                      session_class: Callable[..., RacrSession] = RacrSession) -> RacrSession:
         """The session of a run against ``reference`` with this configuration (what ``racr_node`` and the
         evaluation run); ``clock`` gives the time in seconds; ``threaded``: see :class:`RacrSession`."""
         return session_class(reference.points_m, reference.T_ref_camref, config=self.session,

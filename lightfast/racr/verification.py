@@ -187,6 +187,6 @@ def look_alike_distance(points_cur: ArrayLike, reference: ReferenceCloud, T_ref_
                 dist = float(np.linalg.norm(r.T_ref_cur[:3, 3] - here.T_ref_cur[:3, 3]))
                 if (r.converged and dist > config.basin_separation_m
                         and r.fitness >= config.basin_fitness_ratio * here.fitness
-                        and not dist >= nearest):
+                        and (np.isnan(nearest) or dist < nearest)):
                     nearest = dist
     return nearest, ran

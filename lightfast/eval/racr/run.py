@@ -24,10 +24,12 @@ to place the platform and to score the result.
 """
 from __future__ import annotations
 
+import functools
 import hashlib
 import logging
 import math
 import time
+from collections.abc import Callable
 from dataclasses import replace
 from typing import Any
 
@@ -98,8 +100,9 @@ class _Devices:
 class _PerturbedSession(RacrSession):
     """The §3.7 study: the session with a known rotation error injected into the X of its initialization."""
 
-    error_deg = 0.0
-    seed = 0
+    def __init__(self, *args: Any, error_deg: float, seed: int, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self.error_deg, self.seed = error_deg, seed
 
     def _hand_eye_result(self, result: HandEyeResult) -> HandEyeResult:
         rng = np.random.default_rng(self.seed + 7)
@@ -140,10 +143,9 @@ def _run_racr(scene: Any, devices: _Devices, node: RacrNodeConfig, config: RacrE
               record: RunRecord) -> None:
     plat, vse = devices.platform, devices.vse
     now = [0.0]
-    session_class: type[RacrSession] = RacrSession
+    session_class: Callable[..., RacrSession] = RacrSession
     if config.handeye_error_deg > 0.0:
-        session_class = type("_Perturbed", (_PerturbedSession,), {"error_deg": config.handeye_error_deg,
-                                                                  "seed": devices.seed})
+        session_class = functools.partial(_PerturbedSession, error_deg=config.handeye_error_deg, seed=devices.seed)
     racr = node.start_session(scene.reference, clock=lambda: now[0], threaded=False, session_class=session_class)
 
     def observe() -> None:
