@@ -17,6 +17,7 @@ from lightfast.daylight.mesh import ReflectanceMesh
 from lightfast.daylight.proximity import closest_surface_points
 
 if TYPE_CHECKING:
+    from lightfast.daylight.sun import Site
     from lightfast.sim.radiance_oracle import Component
 
 
@@ -72,27 +73,37 @@ def snap_to_vertices(lmap: LightingMap, points_m: ArrayLike, normals: ArrayLike
 
 
 def compare_with_radiance(mesh: ReflectanceMesh, *, points: int, seed: int, repeats: int,
-                          config: LightingMapConfig, sun_disk_samples: int = 19,
-                          at_vertices: bool = True) -> dict[str, Agreement]:
-    """Prepare a lighting map of ``mesh`` and compare its sky, ground and sun irradiance with Radiance at
-    ``points`` surface points (see :mod:`lightfast.sim.radiance_oracle`), snapped to mesh vertices unless
-    ``at_vertices`` is False (then our values are interpolated inside triangles, which blurs shadow edges over
-    a triangle)."""
+                          config: LightingMapConfig, sun_direction: ArrayLike = SUN_DIRECTION,
+                          site: Site | None = None, junction_points: int = 0, sun_disk_samples: int = 19,
+                          at_vertices: bool = True, lmap: LightingMap | None = None,
+                          progress: bool = False, timeout_s: float = 3600.0) -> dict[str, Agreement]:
+    """Prepare a lighting map of ``mesh`` (or take ``lmap``) and compare its sky, ground and sun irradiance with
+    Radiance (see :mod:`lightfast.sim.radiance_oracle`) at ``points`` surface points away from creases followed by
+    ``junction_points`` points within 2 cm of a crease (where parts meet: issue 21), snapped to mesh vertices
+    unless ``at_vertices`` is False (then our values are interpolated inside triangles, which blurs shadow edges
+    over a triangle). ``sun_direction``: unit vector to the sun in the mesh frame; ``site`` only names where the
+    map is prepared (the normalized components do not depend on it)."""
     from lightfast.daylight.sun import FREIBURG
     from lightfast.daylight.sun_update import sun_radiosity
     from lightfast.sim.radiance_oracle import radiance_irradiance
     from lightfast.sim.validation_rooms import sample_surface_points
 
-    lmap = prepare_lighting_map(mesh, FREIBURG, config)
+    if lmap is None:
+        lmap = prepare_lighting_map(mesh, site or FREIBURG, config, progress=progress)
     pts, nrm = sample_surface_points(mesh, points, seed=seed)
+    if junction_points:
+        jp, jn = sample_surface_points(mesh, junction_points, seed=seed + 1, near_edges_only_m=0.02)
+        pts, nrm = np.concatenate([pts, jp]), np.concatenate([nrm, jn])
     if at_vertices:
         pts, nrm = snap_to_vertices(lmap, pts, nrm)
+    sun = np.asarray(sun_direction, dtype=np.float64)
     ours: dict[Component, NDArray[np.float32]] = {
-        "sky": lmap.sky_radiosity, "ground": lmap.ground_radiosity, "sun": sun_radiosity(lmap, SUN_DIRECTION)}
+        "sky": lmap.sky_radiosity, "ground": lmap.ground_radiosity, "sun": sun_radiosity(lmap, sun)}
     out: dict[str, Agreement] = {}
     for component, radiosity in ours.items():
         ref = radiance_irradiance(mesh, pts, nrm, component=component, repeats=repeats,
-                                  sun_direction=SUN_DIRECTION if component == "sun" else None,
-                                  sun_disk_samples=sun_disk_samples if component == "sun" else 1)
+                                  sun_direction=sun if component == "sun" else None,
+                                  sun_disk_samples=sun_disk_samples if component == "sun" else 1,
+                                  timeout_s=timeout_s)
         out[component] = Agreement.of(irradiance_at_points(lmap, radiosity, pts, nrm), ref)
     return out

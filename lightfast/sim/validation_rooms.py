@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import itertools
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -274,6 +274,94 @@ def furnished_room(
     return merge_meshes(parts)
 
 
+def _tint(rng: np.random.Generator, lo: float, hi: float) -> RGB:
+    """A linear RGB albedo: a grey level in [lo, hi] with each channel varied by up to ±15 %."""
+    grey = rng.uniform(lo, hi)
+    r, g, b = np.clip(grey * rng.uniform(0.85, 1.15, 3), 0.02, 0.95)
+    return float(r), float(g), float(b)
+
+
+def random_room(seed: int, *, window_wall: str = "south", tessellation_m: float = 0.05,
+                max_tries: int = 200) -> ReflectanceMesh:
+    """A furnished room drawn from ``seed``, for validation on rooms no development saw.
+
+    Drawn: the size (3.8–6 × 3.8–6 × 2.5–3.2 m), the window on ``window_wall`` (0.9–2.4 m wide, 1.0–1.8 m high,
+    sill 0.4–1.1 m, wall 0.15–0.4 m thick) with a cross (bar 4–10 cm, at 30–70 % of the wall's depth, transom at
+    35–65 % of the height) whose bars stand on the sill and end on the reveals, every albedo, and furniture that
+    touches the room: a table (closed top on four closed legs standing on the floor), a cabinet standing on the
+    floor with its back against a side wall, a box against the wall opposite the window, a shelf board on the other
+    side wall and, on half the seeds, a low box under the window against the window wall. Furniture boxes are closed
+    (their faces lie on the floor and walls they touch: the junctions of issue 21). Pieces do not overlap.
+    """
+    rng = np.random.default_rng(seed)
+    X, Y = rng.uniform(3.8, 6.0, 2)
+    Z = rng.uniform(2.5, 3.2)
+    size = (float(X), float(Y), float(Z))
+    w = _WallFrame(window_wall, size)
+    width = rng.uniform(0.9, min(2.4, w.length - 1.4))
+    height = rng.uniform(1.0, min(1.8, Z - 1.0))
+    sill = rng.uniform(0.4, min(1.1, Z - height - 0.3))
+    thickness = rng.uniform(0.15, 0.4)
+    wall_rho = _tint(rng, 0.45, 0.85)
+    parts, w, opening = _room_shell(size, (width, height, sill, window_wall), thickness, _tint(rng, 0.12, 0.5),
+                                    wall_rho, _tint(rng, 0.7, 0.9), tessellation_m)
+    L, D = w.length, w.depth
+    t = tessellation_m
+
+    def box(a0: float, a1: float, d0: float, d1: float, z0: float, z1: float, rho: RGB) -> list[ReflectanceMesh]:
+        return _box(w.to_world(a0, d0, z0), w.to_world(a1, d1, z1), rho, t)
+
+    a_lo, a_hi, z_lo, z_hi = opening
+    m = 0.5 * rng.uniform(0.04, 0.10)
+    dc = -rng.uniform(0.3, 0.7) * thickness
+    ac = a_lo + rng.uniform(0.35, 0.65) * (a_hi - a_lo)
+    zc = z_lo + rng.uniform(0.35, 0.65) * (z_hi - z_lo)
+    frame = _tint(rng, 0.5, 0.85)
+    parts += box(ac - m, ac + m, dc - m, dc + m, z_lo, z_hi, frame)
+    parts += box(a_lo, ac - m, dc - m, dc + m, zc - m, zc + m, frame)
+    parts += box(ac + m, a_hi, dc - m, dc + m, zc - m, zc + m, frame)
+
+    placed: list[tuple[float, float, float, float]] = []  # footprints (a0, a1, d0, d1) with 5 cm clearance
+
+    def place(draw: Callable[[], tuple[float, float, float, float]]) -> tuple[float, float, float, float]:
+        for _ in range(max_tries):
+            a0, a1, d0, d1 = draw()
+            if 0.0 <= a0 < a1 <= L and 0.0 <= d0 < d1 <= D and not any(
+                    a0 < b1 + 0.05 and b0 < a1 + 0.05 and d0 < e1 + 0.05 and e0 < d1 + 0.05
+                    for b0, b1, e0, e1 in placed):
+                placed.append((a0, a1, d0, d1))
+                return a0, a1, d0, d1
+        raise ValidationRoomError(f"seed {seed}: could not place the furniture in a {L:.2f} × {D:.2f} m room")
+
+    if rng.random() < 0.5:  # a low box under the window, against the window wall
+        bw, bh = rng.uniform(0.6, 1.0) * width, rng.uniform(0.2, 0.8) * sill
+        a0, a1, d0, d1 = place(lambda: (0.5 * (L - bw), 0.5 * (L + bw), 0.0, float(rng.uniform(0.1, 0.3))))
+        parts += box(a0, a1, d0, d1, 0.0, bh, _tint(rng, 0.3, 0.8))
+    tw, tdp, th = rng.uniform(0.8, 1.6), rng.uniform(0.6, 1.0), rng.uniform(0.68, 0.78)
+    a0, a1, d0, d1 = place(lambda: (a := float(rng.uniform(0.3, L - tw - 0.3)), a + tw,
+                                    d := float(rng.uniform(0.6, max(0.7, D - tdp - 1.0))), d + tdp))
+    table = _tint(rng, 0.15, 0.6)
+    parts += box(a0, a1, d0, d1, th - 0.04, th, table)
+    leg = rng.uniform(0.04, 0.07)
+    for la, ld in ((a0 + 0.03, d0 + 0.03), (a1 - 0.03 - leg, d0 + 0.03), (a0 + 0.03, d1 - 0.03 - leg),
+                   (a1 - 0.03 - leg, d1 - 0.03 - leg)):
+        parts += box(la, la + leg, ld, ld + leg, 0.0, th - 0.04, table)
+    side = 0.0 if rng.random() < 0.5 else L
+    cw, cd, ch = rng.uniform(0.6, 1.5), rng.uniform(0.35, 0.6), rng.uniform(0.8, 2.2)
+    a0, a1, d0, d1 = place(lambda: ((0.0, cd) if side == 0.0 else (L - cd, L)) +
+                           ((d := float(rng.uniform(0.4, D - cw - 0.2))), d + cw))
+    parts += box(a0, a1, d0, d1, 0.0, ch, _tint(rng, 0.2, 0.7))
+    bs = rng.uniform(0.3, 0.7)
+    a0, a1, d0, d1 = place(lambda: ((a := float(rng.uniform(0.2, L - bs - 0.2))), a + bs, D - bs, D))
+    parts += box(a0, a1, d0, d1, 0.0, bs * rng.uniform(0.7, 1.3), _tint(rng, 0.15, 0.7))
+    sl, sz = rng.uniform(0.8, 1.5), rng.uniform(1.2, min(1.9, Z - 0.4))
+    sd = float(rng.uniform(0.3, max(0.4, D - sl - 0.3)))
+    other = L if side == 0.0 else 0.0
+    board = (other - 0.3, other) if other else (0.0, 0.3)
+    parts += box(board[0], board[1], sd, sd + sl, sz, sz + 0.03, _tint(rng, 0.3, 0.7))
+    return merge_meshes(parts)
+
+
 def _point_segment_dist(p: NDArray[np.float64], a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
     ab = b - a
     s = np.clip(np.sum((p - a) * ab, axis=1) / np.maximum(np.sum(ab * ab, axis=1), 1e-300), 0.0, 1.0)
@@ -329,12 +417,33 @@ def _near_creases(mesh: ReflectanceMesh, points: NDArray[np.float64], face_idx: 
     return near
 
 
+def _hidden(caster: RayCaster, face_normals: NDArray[np.float64], points: NDArray[np.float64],
+            normals: NDArray[np.float64], rng: np.random.Generator, rays: int = 16) -> NDArray[np.bool_]:
+    """True for points no light reaches: enclosed (under a box standing on the floor, behind a cabinet against a
+    wall: a ray from just above the point first hits the *back* of a triangle) or pressed face to face against
+    another surface with nothing on their side (a box's bottom on the floor: every ray of the point's hemisphere
+    leaves the scene, which no visible point of a closed room does)."""
+    if len(points) == 0:
+        return np.zeros(0, dtype=bool)
+    d = rng.normal(size=(len(points), rays, 3))
+    d /= np.linalg.norm(d, axis=2, keepdims=True)
+    d = np.where(np.sum(d * normals[:, None], axis=2, keepdims=True) < 0, -d, d)
+    d[:, 0] = normals
+    o = np.repeat((points + 1e-4 * normals)[:, None], rays, axis=1)
+    hits = caster.intersect(o.reshape(-1, 3), d.reshape(-1, 3))
+    hit = hits.hit.reshape(len(points), rays)
+    back = hit & (np.sum(face_normals[np.where(hits.hit, hits.triangle_id, 0)].reshape(len(points), rays, 3) * d,
+                         axis=2) > 0.0)
+    return np.any(back, axis=1) | ~np.any(hit, axis=1)
+
+
 def sample_surface_points(
     mesh: ReflectanceMesh,
     n: int,
     *,
     seed: int,
     exclude_near_edges_m: float = 0.05,
+    near_edges_only_m: float = 0.0,
     max_rounds: int = 50,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """``n`` points uniformly distributed by area on the mesh's visible surfaces, with their face normals.
@@ -344,14 +453,16 @@ def sample_surface_points(
     * it lies within ``exclude_near_edges_m`` of a triangle in another plane (a crease: room corners, where furniture
       meets the floor or a wall, the window reveals) or of a mesh boundary edge (openings; also creases between
       separately tessellated parts), so comparisons happen where the lighting is well defined; or
-    * a ray along its normal first hits the *back* of a triangle, i.e. the point is enclosed (under a box standing
-      on the floor, behind a shelf against a wall).
+    * no light reaches it (:func:`_hidden`): enclosed (under a box standing on the floor, behind a shelf against a
+      wall) or pressed face to face against another surface (a closed box's bottom on the floor).
 
     Args:
         mesh: the scene (front faces towards the air).
         n: number of points wanted.
         seed: seed of the NumPy random generator (the result is deterministic).
         exclude_near_edges_m: clearance from creases and boundary edges in metres (0 disables the test).
+        near_edges_only_m: if positive, the opposite: only points within this distance of a crease or boundary edge
+            (junctions, where the visibility rays of issue 21 went wrong); ``exclude_near_edges_m`` is then ignored.
         max_rounds: candidate batches to draw before giving up.
 
     Returns:
@@ -382,12 +493,12 @@ def sample_surface_points(
         p = w0[:, None] * tri[fi, 0] + w1[:, None] * tri[fi, 1] + w2[:, None] * tri[fi, 2]
         nrm = fn[fi]
         ok = np.ones(m, dtype=bool)
-        if exclude_near_edges_m > 0:
+        if near_edges_only_m > 0:
+            ok &= _near_creases(mesh, p, fi, near_edges_only_m)
+        elif exclude_near_edges_m > 0:
             ok &= ~_near_creases(mesh, p, fi, exclude_near_edges_m)
-        hits = caster.intersect(p[ok] + 1e-4 * nrm[ok], nrm[ok])
-        back = hits.hit & (np.sum(fn[np.where(hits.hit, hits.triangle_id, 0)] * nrm[ok], axis=1) > 0.0)
         idx = np.flatnonzero(ok)
-        ok[idx[back]] = False
+        ok[idx[_hidden(caster, fn, p[ok], nrm[ok], rng)]] = False
         got_p.append(p[ok])
         got_n.append(nrm[ok])
         have += int(ok.sum())

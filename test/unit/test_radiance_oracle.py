@@ -23,7 +23,7 @@ from lightfast.sim.radiance_oracle import (
     radiance_irradiance_with_error,
     scene_description,
 )
-from lightfast.sim.validation_rooms import box_room_with_window, furnished_room, sample_surface_points
+from lightfast.sim.validation_rooms import box_room_with_window, furnished_room, random_room, sample_surface_points
 
 pytestmark = pytest.mark.skipif(
     not radiance_available(), reason="Radiance binaries (oconv, rtrace from pyradiance) not found"
@@ -285,6 +285,37 @@ def test_sample_surface_points() -> None:
     quad = as_mesh([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], [[0, 1, 2], [0, 2, 3]], (0.5, 0.5, 0.5))
     with pytest.raises(ValidationRoomError, match="found only 0 of 10"):
         sample_surface_points(quad, 10, seed=0, exclude_near_edges_m=0.6, max_rounds=2)  # all near the border
+
+
+@pytest.mark.parametrize(("seed", "wall"), [(1, "south"), (2, "west"), (3, "north")])
+def test_random_room_is_closed_furnished_and_sampled_where_light_reaches(seed: int, wall: str) -> None:
+    m = random_room(seed, window_wall=wall, tessellation_m=0.2)
+    m.validate_topology()
+    again = random_room(seed, window_wall=wall, tessellation_m=0.2)
+    np.testing.assert_array_equal(m.vertices_m, again.vertices_m)
+    assert m.num_vertices != random_room(seed + 100, window_wall=wall, tessellation_m=0.2).num_vertices
+    floor = m.vertices_m[m.faces[m.face_normals[:, 2] > 0.99]].reshape(-1, 3)
+    X, Y = (float(v) for v in floor[floor[:, 2] < 1e-9].max(axis=0)[:2])  # the room, not the window reveals
+    Z = float(m.vertices_m[:, 2].max())
+    caster = RayCaster(m.vertices_m, m.faces)
+    origin = np.array([0.5 * X, 0.5 * Y, Z - 0.15])  # above every piece of furniture
+    d = _rays_from(origin, 20000, seed=seed)
+    hits = caster.intersect(np.broadcast_to(origin, d.shape), d)
+    n_hit = m.face_normals[hits.triangle_id[hits.hit]]
+    assert np.all(np.sum(n_hit * d[hits.hit], axis=1) < 0.0)  # only front faces are seen from inside
+    assert 0 < np.sum(~hits.hit) < 0.1 * len(d)  # light leaves only through the window
+    # closed furniture boxes stand on the floor: faces at z = 0 that face down
+    down = (m.face_normals[:, 2] < -0.99) & (m.vertices_m[m.faces][:, :, 2].max(axis=1) < 1e-9)
+    assert down.sum() > 0
+    p, n = sample_surface_points(m, 200, seed=5)
+    pj, nj = sample_surface_points(m, 100, seed=6, near_edges_only_m=0.02)
+    for pts, nrm in ((p, n), (pj, nj)):
+        assert not np.any((pts[:, 2] < 1e-9) & (nrm[:, 2] < 0))  # no box bottom pressed on the floor
+        outward = (((np.abs(pts[:, 0]) < 1e-9) & (nrm[:, 0] < -0.99))
+                   | ((np.abs(pts[:, 0] - X) < 1e-9) & (nrm[:, 0] > 0.99))
+                   | ((np.abs(pts[:, 1]) < 1e-9) & (nrm[:, 1] < -0.99))
+                   | ((np.abs(pts[:, 1] - Y) < 1e-9) & (nrm[:, 1] > 0.99)))
+        assert not np.any(outward)  # no cabinet back pressed against a wall
 
 
 def test_room_parameter_errors() -> None:
