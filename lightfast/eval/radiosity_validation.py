@@ -6,7 +6,7 @@ per light component (the method's brightness scales absorb any global factor).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -30,6 +30,10 @@ class Agreement:
     scale: float
     median_relative_error: float
     pearson_r: float
+    points_m: NDArray[np.float64] | None = None  # (N, 3) where, if known
+    normals: NDArray[np.float64] | None = None  # (N, 3)
+    #: the reference's own Monte Carlo noise: median over points of its standard error / its value (NaN: unknown)
+    reference_noise: float = float("nan")
 
     @classmethod
     def of(cls, ours: ArrayLike, reference: ArrayLike) -> Agreement:
@@ -78,32 +82,39 @@ def compare_with_radiance(mesh: ReflectanceMesh, *, points: int, seed: int, repe
                           at_vertices: bool = True, lmap: LightingMap | None = None,
                           progress: bool = False, timeout_s: float = 3600.0) -> dict[str, Agreement]:
     """Prepare a lighting map of ``mesh`` (or take ``lmap``) and compare its sky, ground and sun irradiance with
-    Radiance (see :mod:`lightfast.sim.radiance_oracle`) at ``points`` surface points away from creases followed by
-    ``junction_points`` points within 2 cm of a crease (where parts meet: issue 21), snapped to mesh vertices
-    unless ``at_vertices`` is False (then our values are interpolated inside triangles, which blurs shadow edges
-    over a triangle). ``sun_direction``: unit vector to the sun in the mesh frame; ``site`` only names where the
-    map is prepared (the normalized components do not depend on it)."""
+    Radiance (see :mod:`lightfast.sim.radiance_oracle`) at ``points`` surface points away from creases, snapped to
+    mesh vertices unless ``at_vertices`` is False (then our values are interpolated inside triangles, which blurs
+    shadow edges over a triangle), followed by ``junction_points`` points 2 mm – 2 cm from a crease (where parts
+    meet: issue 21) where our values are interpolated from the triangle's vertices, those on the crease included.
+    ``sun_direction``: unit vector to the sun in the mesh frame; ``site`` only names where the map is prepared (the
+    normalized components do not depend on it). With ``repeats >= 2`` each agreement carries Radiance's own noise."""
     from lightfast.daylight.sun import FREIBURG
     from lightfast.daylight.sun_update import sun_radiosity
-    from lightfast.sim.radiance_oracle import radiance_irradiance
+    from lightfast.sim.radiance_oracle import radiance_irradiance, radiance_irradiance_with_error
     from lightfast.sim.validation_rooms import sample_surface_points
 
     if lmap is None:
         lmap = prepare_lighting_map(mesh, site or FREIBURG, config, progress=progress)
     pts, nrm = sample_surface_points(mesh, points, seed=seed)
-    if junction_points:
-        jp, jn = sample_surface_points(mesh, junction_points, seed=seed + 1, near_edges_only_m=0.02)
-        pts, nrm = np.concatenate([pts, jp]), np.concatenate([nrm, jn])
     if at_vertices:
         pts, nrm = snap_to_vertices(lmap, pts, nrm)
+    if junction_points:  # 2 mm – 2 cm from a crease, never snapped: our values interpolated from the crease vertices
+        jp, jn = sample_surface_points(mesh, junction_points, seed=seed + 1, near_edges_only_m=0.02,
+                                       exclude_near_edges_m=0.002)
+        pts, nrm = np.concatenate([pts, jp]), np.concatenate([nrm, jn])
     sun = np.asarray(sun_direction, dtype=np.float64)
     ours: dict[Component, NDArray[np.float32]] = {
         "sky": lmap.sky_radiosity, "ground": lmap.ground_radiosity, "sun": sun_radiosity(lmap, sun)}
     out: dict[str, Agreement] = {}
     for component, radiosity in ours.items():
-        ref = radiance_irradiance(mesh, pts, nrm, component=component, repeats=repeats,
-                                  sun_direction=sun if component == "sun" else None,
-                                  sun_disk_samples=sun_disk_samples if component == "sun" else 1,
-                                  timeout_s=timeout_s)
-        out[component] = Agreement.of(irradiance_at_points(lmap, radiosity, pts, nrm), ref)
+        kwargs = {"component": component, "repeats": repeats, "sun_direction": sun if component == "sun" else None,
+                  "sun_disk_samples": sun_disk_samples if component == "sun" else 1, "timeout_s": timeout_s}
+        noise = float("nan")
+        if repeats >= 2:
+            ref, se = radiance_irradiance_with_error(mesh, pts, nrm, **kwargs)  # type: ignore[arg-type]
+            noise = float(np.median(se.mean(axis=1) / np.maximum(ref.mean(axis=1), 1e-12)))
+        else:
+            ref = radiance_irradiance(mesh, pts, nrm, **kwargs)  # type: ignore[arg-type]
+        out[component] = replace(Agreement.of(irradiance_at_points(lmap, radiosity, pts, nrm), ref), points_m=pts,
+                                 normals=nrm, reference_noise=noise)
     return out

@@ -461,8 +461,10 @@ def sample_surface_points(
         n: number of points wanted.
         seed: seed of the NumPy random generator (the result is deterministic).
         exclude_near_edges_m: clearance from creases and boundary edges in metres (0 disables the test).
-        near_edges_only_m: if positive, the opposite: only points within this distance of a crease or boundary edge
-            (junctions, where the visibility rays of issue 21 went wrong); ``exclude_near_edges_m`` is then ignored.
+        near_edges_only_m: if positive, only points within this distance of a crease or boundary edge (and still
+            ``exclude_near_edges_m`` from it): the neighbourhood of junctions, where the visibility rays of issue 21
+            went wrong. Exactly on a crease the irradiance is not defined (a reference renderer's query point lies in
+            the other surface's plane and sees through it), hence the inner limit.
         max_rounds: candidate batches to draw before giving up.
 
     Returns:
@@ -473,6 +475,9 @@ def sample_surface_points(
     """
     if n < 0:
         raise ValidationRoomError(f"n must be >= 0, got {n}")
+    if 0 < near_edges_only_m <= exclude_near_edges_m:
+        raise ValidationRoomError(f"near_edges_only_m={near_edges_only_m} leaves no band outside "
+                                  f"exclude_near_edges_m={exclude_near_edges_m}")
     rng = np.random.default_rng(seed)
     areas = mesh.face_areas_m2
     prob = areas / areas.sum()
@@ -495,7 +500,7 @@ def sample_surface_points(
         ok = np.ones(m, dtype=bool)
         if near_edges_only_m > 0:
             ok &= _near_creases(mesh, p, fi, near_edges_only_m)
-        elif exclude_near_edges_m > 0:
+        if exclude_near_edges_m > 0:
             ok &= ~_near_creases(mesh, p, fi, exclude_near_edges_m)
         idx = np.flatnonzero(ok)
         ok[idx[_hidden(caster, fn, p[ok], nrm[ok], rng)]] = False

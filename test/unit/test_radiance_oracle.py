@@ -308,7 +308,7 @@ def test_random_room_is_closed_furnished_and_sampled_where_light_reaches(seed: i
     down = (m.face_normals[:, 2] < -0.99) & (m.vertices_m[m.faces][:, :, 2].max(axis=1) < 1e-9)
     assert down.sum() > 0
     p, n = sample_surface_points(m, 200, seed=5)
-    pj, nj = sample_surface_points(m, 100, seed=6, near_edges_only_m=0.02)
+    pj, nj = sample_surface_points(m, 100, seed=6, near_edges_only_m=0.02, exclude_near_edges_m=0.002)
     for pts, nrm in ((p, n), (pj, nj)):
         assert not np.any((pts[:, 2] < 1e-9) & (nrm[:, 2] < 0))  # no box bottom pressed on the floor
         outward = (((np.abs(pts[:, 0]) < 1e-9) & (nrm[:, 0] < -0.99))
