@@ -43,20 +43,15 @@ def _write(path: Path, text: str) -> None:
     print(f"wrote {path.relative_to(ROOT)}")
 
 
+def _write_json(path: Path, summary: dict[str, Any]) -> None:
+    from lightfast.io import json_finite
+
+    _write(path, json.dumps(json_finite(summary), indent=1, default=float, allow_nan=False) + "\n")
+
+
 def _machine() -> dict[str, Any]:
     return {"date": datetime.now(UTC).isoformat(timespec="seconds"), "cpus": os.cpu_count(),
             "python": platform.python_version()}
-
-
-def _finite(x: Any) -> Any:
-    """NaN (a rate over no runs) as JSON null."""
-    if isinstance(x, dict):
-        return {k: _finite(v) for k, v in x.items()}
-    if isinstance(x, list | tuple):
-        return [_finite(v) for v in x]
-    if isinstance(x, float | np.floating) and math.isnan(x):
-        return None
-    return x
 
 
 def _rate(flags: list[bool]) -> float:
@@ -109,8 +104,7 @@ def run_racr(work: Path, jobs: int) -> None:
         "machine": _machine(), "wall_s": time.perf_counter() - t0,
     }
     out_dir = RESULTS / "eval_racr"
-    text = json.dumps(_finite(summary), indent=1, default=float, allow_nan=False)
-    _write(out_dir / "heldout_summary.json", text + "\n")
+    _write_json(out_dir / "heldout_summary.json", summary)
     lines = ["# rACR on the held-out scene sets (benchmarks/results/HELDOUT.md)", "",
              f"Scene sets {', '.join(map(str, RACR_SEEDS))}, {summary['scenes']} scenes; the node's default "
              "configuration; made by `benchmarks/heldout.py racr`.", "",
@@ -158,8 +152,7 @@ def run_vtr(work: Path, jobs: int) -> None:
         "per_route": per_route, "machine": _machine(), "wall_s": time.perf_counter() - t0,
     }
     out_dir = RESULTS / "eval_vtr"
-    text = json.dumps(_finite(summary), indent=1, default=float, allow_nan=False)
-    _write(out_dir / "heldout_summary.json", text + "\n")
+    _write_json(out_dir / "heldout_summary.json", summary)
     lines = ["# VT&R on the held-out routes (benchmarks/results/HELDOUT.md)", "",
              f"Routes {', '.join(map(str, VTR_ROUTES))} (300 m, 320×240, 1 Hz, teach + ten repeats); the node's "
              "default configuration; made by `benchmarks/heldout.py vtr`. Strict: a stretch is manual while the "

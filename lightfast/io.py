@@ -122,3 +122,15 @@ def read_json_mapping(path: str | os.PathLike[str], *, error: type[Exception], w
     if not isinstance(doc, dict):
         raise error(f"{path}: {what} must be a JSON object, got {type(doc).__name__}")
     return doc
+
+
+def json_finite(x: Any) -> Any:
+    """``x`` (nested dicts, lists, tuples, numbers) with every NaN replaced by ``None``, so that ``json.dumps``
+    writes standard JSON (``null``) instead of the non-standard ``NaN`` (e.g. a rate over no runs)."""
+    if isinstance(x, dict):
+        return {k: json_finite(v) for k, v in x.items()}
+    if isinstance(x, list | tuple):
+        return [json_finite(v) for v in x]
+    if isinstance(x, float | np.floating) and np.isnan(x):
+        return None
+    return x

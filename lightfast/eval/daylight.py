@@ -54,7 +54,8 @@ from lightfast.progress import track
 from lightfast.topics import COLOR_INFO_TOPIC, COLOR_TOPIC, DEPTH_TOPIC, GT_POSE_TOPIC
 from lightfast.tracking.pipeline import RGBDTracker, TrackerConfig
 
-__all__ = ["METHODS", "FrameRecord", "SequenceRun", "evaluate_daylight", "run_sequence"]
+__all__ = ["METHODS", "FrameRecord", "SequenceRun", "evaluate_daylight", "recording_frames", "run_sequence", "scene_of",
+           "sequence_files"]
 
 log = logging.getLogger(__name__)
 
@@ -110,9 +111,10 @@ class SequenceRun:
         return float(np.sqrt(np.mean(e**2))) if len(e) else math.nan
 
 
-def _frames(bag_dir: Path) -> Iterator[tuple[int, NDArray[np.uint8], NDArray[np.float32], PinholeCamera,
-                                              NDArray[np.float64]]]:
-    """(stamp, rgb, depth_m, camera, T_gt) per frame, paired by exact stamp."""
+def recording_frames(bag_dir: Path) -> Iterator[tuple[int, NDArray[np.uint8], NDArray[np.float32], PinholeCamera,
+                                                     NDArray[np.float64]]]:
+    """(stamp_ns, rgb, depth_m, camera, T_map_cam of the ground truth) per frame of a simulated recording, paired by
+    exact stamp."""
     from lightfast.ros.convert import camera_from_camera_info, image_to_numpy, pose_stamped_to_matrix
 
     parts: dict[int, dict[str, object]] = {}
@@ -136,7 +138,8 @@ def _frames(bag_dir: Path) -> Iterator[tuple[int, NDArray[np.uint8], NDArray[np.
                 yield stamp, p["rgb"], p["depth"], p["camera"], p["gt"]  # type: ignore[misc]
 
 
-def _sequence_files(seq_dir: Path) -> dict[str, Path]:
+def sequence_files(seq_dir: Path) -> dict[str, Path]:
+    """The recording's bag, camera response and sequence info (:class:`DaylightEvalError` if one is missing)."""
     files = {"bag": seq_dir / "bag", "crf": seq_dir / "camera.yaml", "info": seq_dir / "sequence.json"}
     missing = [str(p) for p in files.values() if not p.exists()]
     if missing:
@@ -147,7 +150,7 @@ def _sequence_files(seq_dir: Path) -> dict[str, Path]:
 
 def sequence_sun_radiosity(seq_dir: Path, lmap: LightingMap) -> NDArray[np.float32]:
     """B̂_sun for the middle of a recording (from its ``sequence.json`` start time, frame count and rate)."""
-    info = json.loads(_sequence_files(seq_dir)["info"].read_text())
+    info = json.loads(sequence_files(seq_dir)["info"].read_text())
     start = dt.datetime.fromisoformat(info["start_utc"])
     mid_ns = int(start.timestamp() * 1e9) + int(0.5 * info["frames"] / float(info["rate_hz"]) * 1e9)
     return sun_radiosity(lmap, sun_position(lmap.site, mid_ns).direction_map)
@@ -159,7 +162,7 @@ def run_sequence(seq_dir: Path, lmap: LightingMap, method: str, *, max_frames: i
     """Run one method over one recording with the §IV-C protocol (see the module docstring)."""
     if method not in METHODS:
         raise DaylightEvalError(f"unknown method {method!r}; choose from {', '.join(METHODS)}")
-    files = _sequence_files(seq_dir)
+    files = sequence_files(seq_dir)
     mode, reference, brightness = METHODS[method]
     info = json.loads(files["info"].read_text())
     frames_total = int(info["frames"])
@@ -169,7 +172,7 @@ def run_sequence(seq_dir: Path, lmap: LightingMap, method: str, *, max_frames: i
     run = SequenceRun(seq_dir.name, method)
     tracker: RGBDTracker | None = None
     n = frames_total if max_frames is None else min(frames_total, max_frames)
-    it = _frames(files["bag"])
+    it = recording_frames(files["bag"])
     for i, (stamp, rgb, depth_m, camera, T_gt) in track(enumerate(it), desc=f"{seq_dir.name} {method}", total=n,
                                                         enabled=progress, unit="frame"):
         if i >= n:
@@ -380,7 +383,7 @@ def evaluate_daylight(sim_dir: Path, out_dir: Path, *, methods: Sequence[str] = 
     t0 = time.perf_counter()
     cfg_dict = None if map_config is None else dataclasses.asdict(map_config)
     map_meta = {}
-    for scene in dict.fromkeys(_scene_of(s) for s in seq_dirs):
+    for scene in dict.fromkeys(scene_of(s) for s in seq_dirs):
         meta_path = maps_dir / scene / "metadata.json"
         current = meta_path.exists() and json.loads(meta_path.read_text()).get("version") == MAP_FORMAT_VERSION
         if not current:  # prepare once (or again, if an older lightfast made it) before the workers load it
@@ -390,7 +393,7 @@ def evaluate_daylight(sim_dir: Path, out_dir: Path, *, methods: Sequence[str] = 
     todo = []
     for seq in seq_dirs:
         for m in methods:
-            key = _run_key(seq, m, map_meta[_scene_of(seq)], max_frames)
+            key = _run_key(seq, m, map_meta[scene_of(seq)], max_frames)
             stored = _load_run(out_dir, seq.name, m, key)
             if stored is not None:
                 runs.append(stored)
@@ -426,7 +429,8 @@ def evaluate_daylight(sim_dir: Path, out_dir: Path, *, methods: Sequence[str] = 
     return runs
 
 
-def _scene_of(seq_dir: Path) -> str:
+def scene_of(seq_dir: Path) -> str:
+    """The scene name a simulated recording was made in."""
     return str(json.loads((seq_dir / "sequence.json").read_text())["sequence"]["scene"])
 
 

@@ -9,7 +9,7 @@ Evaluation code: reads the true poses, mesh (``<recording>/mesh.ply``), sun (``t
   projected live depth (camera frame, m), n the true mesh normal on that pixel's ray (dropped if the mesh depth
   differs by more than ``depth_outlier_trunc_m``). Increment (ρ, φ): translation (m), rotation about the camera
   centre (rad), the tracker's left increment; rotation columns divided by the median depth d̄ (m per d̄·φ);
-* ``photo_ratio``: the same for E_C, the tracker's photometric Jacobian (``kernels._linearize``, source = target =
+* ``photo_ratio``: the same for E_C, the tracker's photometric Jacobian (``kernels.linearize``, source = target =
   the live level at identity: Sobel gradients of grey in [0, 1], noise included); ``photo_weak_ratio``: λ_min of E_C's
   matrix within E_G's weak eigenvectors over its λ_max; ``photo_weak_signal_ratio``: the same after subtracting the
   sensor noise's expected E_C matrix (camera.yaml's noise model through the response; none: 0);
@@ -46,7 +46,7 @@ from lightfast.camera import PinholeCamera
 from lightfast.daylight.crf import CameraResponse, load_crf
 from lightfast.daylight.mesh import ReflectanceMesh, load_ply
 from lightfast.daylight.openings import load_openings, openings_array, through_openings
-from lightfast.eval.daylight import _frames, _scene_of, _sequence_files
+from lightfast.eval.daylight import recording_frames, scene_of, sequence_files
 from lightfast.eval.errors import DaylightEvalError
 from lightfast.geometry import rotation_angle_deg
 from lightfast.progress import track
@@ -54,7 +54,7 @@ from lightfast.raycast import RayCaster
 from lightfast.tracking.errors import TrackingInputError
 from lightfast.tracking.pipeline import TrackerConfig
 from lightfast.tracking.rgbd_odometry import prepare_frame
-from lightfast.tracking.rgbd_odometry.kernels import _linearize
+from lightfast.tracking.rgbd_odometry.kernels import linearize
 
 __all__ = ["FrameRegime", "RegimeScene", "analyze_frame", "analyze_recording", "conditioning", "json_safe",
            "load_scene", "motion_errors", "point_to_plane_information", "summarize", "table_markdown",
@@ -301,7 +301,7 @@ def analyze_frame(rgb: ArrayLike, depth_m: ArrayLike, camera: PinholeCamera, T_m
     p = cam_l.backproject_depth(np.where(use, d_l, 0.0))[use]
     n = nrm_l[use] @ T[:3, :3]  # map → camera frame
     H_g = point_to_plane_information(p, n)
-    H_c = _linearize(level, level, np.eye(4), cfg, True, False).H
+    H_c = linearize(level, level, np.eye(4), cfg, True, False).H
     d_med = float(np.median(p[:, 2]))
     res["geo_ratio"], res["geo_weak"] = conditioning(H_g, d_med)
     res["photo_ratio"] = conditioning(H_c, d_med)[0]
@@ -326,7 +326,7 @@ def load_scene(seq_dir: Path) -> RegimeScene:
     mesh_path = seq_dir / "mesh.ply"
     if not mesh_path.is_file():
         raise DaylightEvalError(f"{seq_dir} has no true scene mesh (mesh.ply); make it with `lightfast sim daylight`")
-    openings = seq_dir.parent / "scenes" / f"{_scene_of(seq_dir)}.openings.yaml"
+    openings = seq_dir.parent / "scenes" / f"{scene_of(seq_dir)}.openings.yaml"
     arr = openings_array(load_openings(openings)) if openings.is_file() else None
     return RegimeScene(load_ply(mesh_path), arr if arr is not None and len(arr) else None)
 
@@ -335,7 +335,7 @@ def analyze_recording(seq_dir: Path, *, max_frames: int | None = None, progress:
                       config: TrackerConfig | None = None) -> list[FrameRegime]:
     """:func:`analyze_frame` over the first ``max_frames`` frames of a recording, with the motion measures."""
     seq_dir = Path(seq_dir)
-    files = _sequence_files(seq_dir)
+    files = sequence_files(seq_dir)
     info = json.loads(files["info"].read_text())
     n = int(info["frames"]) if max_frames is None else min(int(info["frames"]), max_frames)
     if n < 1:
@@ -348,7 +348,7 @@ def analyze_recording(seq_dir: Path, *, max_frames: int | None = None, progress:
         noise = (e_per_x, float(cam_doc["read_noise_e"]) / e_per_x)
     out: list[FrameRegime] = []
     poses = []
-    for i, (stamp, rgb, depth, camera, T_gt) in track(enumerate(_frames(files["bag"])), desc=seq_dir.name,
+    for i, (stamp, rgb, depth, camera, T_gt) in track(enumerate(recording_frames(files["bag"])), desc=seq_dir.name,
                                                       total=n, enabled=progress, unit="frame"):
         if i >= n:
             break

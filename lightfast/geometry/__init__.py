@@ -33,7 +33,7 @@ from lightfast.geometry.checks import ROTATION_ATOL as ROTATION_ATOL
 from lightfast.geometry.checks import Array as Array
 from lightfast.geometry.metrics import rotation_angle_deg, translation_distance
 from lightfast.geometry.se3 import _se3_inv_coeff as _se3_inv_coeff  # the series tests of test_geometry.py
-from lightfast.geometry.se3 import compose, inverse, make_transform, se3_exp, se3_log, transform_points
+from lightfast.geometry.se3 import compose, inverse, look_at, make_transform, se3_exp, se3_log, transform_points
 from lightfast.geometry.sim3 import _sim3_coeffs as _sim3_coeffs  # the series tests of test_geometry.py
 from lightfast.geometry.sim3 import sim3_exp, sim3_inverse, sim3_log
 from lightfast.geometry.so3 import _so3_coeffs as _so3_coeffs  # the series tests of test_geometry.py
@@ -54,6 +54,7 @@ __all__ = [
     "hat",
     "inverse",
     "is_rotation",
+    "look_at",
     "make_transform",
     "matrix_to_quat",
     "project_to_so3",

@@ -37,6 +37,27 @@ def make_transform(R: ArrayLike, t: ArrayLike, *, atol: float = ROTATION_ATOL) -
     return T
 
 
+def look_at(eye: ArrayLike, target: ArrayLike, up: ArrayLike = (0.0, 0.0, 1.0), *, roll_rad: float = 0.0) -> Array:
+    """``T_world_cam`` of an optical camera (x right, y down, z forward) at ``eye`` looking at ``target``, its
+    x axis level with respect to ``up`` (any horizontal one when looking along ``up``), then rolled by ``roll_rad``
+    about the viewing direction."""
+    e = _as_float(eye, "eye", (3,))
+    d = _as_float(target, "target", (3,)) - e
+    if e.ndim != 1 or d.ndim != 1 or np.linalg.norm(d) < 1e-12:
+        raise GeometryError("look_at needs one eye and one target, apart")
+    z = d / np.linalg.norm(d)
+    x = np.cross(z, _as_float(up, "up", (3,)))
+    if np.linalg.norm(x) < 1e-9:  # looking along up
+        x = np.cross(z, [0.0, 1.0, 0.0] if abs(z[1]) < 0.9 else [1.0, 0.0, 0.0])
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    c, s = math.cos(roll_rad), math.sin(roll_rad)
+    T = np.eye(4)
+    T[:3, :3] = np.stack([c * x + s * y, -s * x + c * y, z], axis=1)
+    T[:3, 3] = e
+    return T
+
+
 def inverse(T: ArrayLike, *, atol: float = ROTATION_ATOL) -> Array:
     """Inverse ``(..., 4, 4)`` of a rigid transform: ``inverse(T_a_b) = T_b_a = [[R^T, -R^T t], [0, 1]]``.
 

@@ -27,7 +27,7 @@ from lightfast.daylight.brightness import relit_image
 from lightfast.daylight.crf import CameraResponse, save_crf
 from lightfast.daylight.lighting_map import LightingMap
 from lightfast.daylight.sun_update import sun_radiosity
-from lightfast.geometry import se3_exp
+from lightfast.geometry import look_at, se3_exp
 from lightfast.ros.convert import (
     camera_info_from_camera,
     image_to_numpy,
@@ -52,7 +52,6 @@ from lightfast.topics import (
 )
 from sun_update_node.node import CHUNK_DTYPE
 from test.ros.probe import StatusProbe
-from test.unit.test_brightness import look_at
 
 S_TRUE = np.array([[800.0, 760.0, 680.0], [60.0, 70.0, 90.0], [30.0, 28.0, 24.0]])  # sun, sky, ground
 T0_S = 1_700_000_000
@@ -84,7 +83,8 @@ def make_scene(lighting_map: Path, directory: Path, num_frames: int = 4) -> Scen
     crf = CameraResponse.from_function(lambda v: (v / 255.0) ** 2.2, exposure_s=0.004, sensitivity=2.5)
     crf_file = save_crf(crf, directory / "crf.yaml")
     camera = PinholeCamera(160, 120, 125.0, 125.0, 79.5, 59.5)
-    T0 = look_at([3.5, 4.0, 1.6], [-1.0, -2.0, -0.8])  # towards the south-west corner and the sunlit floor
+    eye = [3.5, 4.0, 1.6]
+    T0 = look_at(eye, np.add(eye, [-1.0, -2.0, -0.8]))  # towards the south-west corner and the sunlit floor
     poses = [T0 @ se3_exp([0.01 * i, 0.005 * i, 0.0, 0.0, 0.01 * i, 0.0]) for i in range(num_frames)]
     scene = Scene(lighting_map, lmap, sun, crf, crf_file, camera, poses, [])
     scene.frames = [scene.render(T) for T in poses]

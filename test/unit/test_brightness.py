@@ -19,21 +19,12 @@ from lightfast.daylight.errors import BrightnessError
 from lightfast.daylight.lighting_map import LightingMapConfig, prepare_lighting_map
 from lightfast.daylight.sun import FREIBURG
 from lightfast.daylight.sun_update import sun_radiosity
+from lightfast.geometry import look_at
 from lightfast.sim.validation_rooms import box_room_with_window
 
 S_TRUE = np.array([[800.0, 760.0, 680.0],  # sun (per unit of B̂_sun)
                    [60.0, 70.0, 90.0],  # sky
                    [30.0, 28.0, 24.0]])  # ground
-
-
-def look_at(p, f) -> np.ndarray:
-    z = np.asarray(f, float) / np.linalg.norm(f)
-    x = np.cross(z, [0.0, 0.0, 1.0])
-    x /= np.linalg.norm(x)
-    T = np.eye(4)
-    T[:3, :3] = np.stack([x, np.cross(z, x), z], axis=1)
-    T[:3, 3] = p
-    return T
 
 
 @pytest.fixture(scope="module")
@@ -44,7 +35,8 @@ def scene():
     el = np.radians(35.0)
     sun = sun_radiosity(lmap, np.array([0.0, -np.cos(el), np.sin(el)]))  # through the south window
     comps = {"sun": sun, "sky": lmap.sky_radiosity, "ground": lmap.ground_radiosity}
-    T = look_at([2.25, 4.3, 1.6], [0.0, -2.8, -1.4])  # from the north wall towards the window and the sun patch
+    eye = [2.25, 4.3, 1.6]
+    T = look_at(eye, np.add(eye, [0.0, -2.8, -1.4]))  # from the north wall towards the window and the sun patch
     camera = PinholeCamera(320, 240, 250.0, 250.0, 159.5, 119.5)
     return lmap, comps, T, camera
 

@@ -24,7 +24,7 @@ from lightfast.eval.daylight_regime import (
     weak_direction_information,
 )
 from lightfast.eval.errors import DaylightEvalError
-from lightfast.geometry import so3_exp
+from lightfast.geometry import look_at, so3_exp
 
 CAMERA = PinholeCamera(320, 240, 262.5, 262.5, 159.5, 119.5)
 F64 = NDArray[np.float64]
@@ -55,19 +55,6 @@ def _quad(corner: tuple[float, ...], eu: tuple[float, ...], ev: tuple[float, ...
     return as_mesh(v, faces, np.repeat(rho[:, None], 3, axis=1))
 
 
-def _look_at(eye: tuple[float, ...], target: tuple[float, ...], up: tuple[float, ...] = (0, 0, 1)) -> F64:
-    """T_map_cam of an optical camera (z forward, x right, y down) at ``eye`` looking at ``target``."""
-    e = np.asarray(eye, dtype=np.float64)
-    z = np.asarray(target) - e
-    z /= np.linalg.norm(z)
-    x = np.cross(z, up)
-    x /= np.linalg.norm(x)
-    T = np.eye(4)
-    T[:3, :3] = np.stack([x, np.cross(z, x), z], axis=1)
-    T[:3, 3] = e
-    return T
-
-
 def _render(scene: RegimeScene, T: F64, texture: Texture, light: Callable[[F64], F64] | None = None
             ) -> tuple[NDArray[np.uint8], NDArray[np.float32]]:
     """Grey-as-RGB image 255 · ρ(p) · light(p) (clipped) and the true z-depth seen at ``T``."""
@@ -91,19 +78,19 @@ def _frame(scene: RegimeScene, T: F64, texture: Texture = _plain, **kw: object) 
 
 def test_a_plane_leaves_three_weak_directions_a_box_corner_none() -> None:
     wall = RegimeScene(_quad((-3, 0, -1), (6, 0, 0), (0, 0, 4)))
-    plane = _frame(wall, _look_at((0.4, 2.0, 1.2), (0, 0, 1)))
+    plane = _frame(wall, look_at((0.4, 2.0, 1.2), (0, 0, 1)))
     assert plane.geo_weak == 3
     assert plane.geo_ratio < 1e-6
     corner = RegimeScene(merge_meshes([_quad((0, 0, 0), (3, 0, 0), (0, 3, 0)), _quad((0, 0, 0), (0, 3, 0), (0, 0, 3)),
                                        _quad((0, 0, 0), (3, 0, 0), (0, 0, 3))]))
-    box = _frame(corner, _look_at((2.2, 1.9, 1.7), (0, 0, 0.3)))
+    box = _frame(corner, look_at((2.2, 1.9, 1.7), (0, 0, 0.3)))
     assert box.geo_weak == 0
     assert box.geo_ratio > 1e-2  # 0.019: even a room corner is only 7x above the weak threshold in std
     assert box.pixels > 0.9 * 160 * 120
 
 
 def test_texture_fills_the_weak_directions_a_plane_leaves() -> None:
-    T = _look_at((0.4, 2.0, 1.2), (0, 0, 1))
+    T = look_at((0.4, 2.0, 1.2), (0, 0, 1))
     plain = _frame(RegimeScene(_quad((-3, 0, -1), (6, 0, 0), (0, 0, 4))), T)
     assert plain.photo_ratio == 0.0  # a constant image has no photometric information
     assert plain.photo_weak_ratio == 0.0
@@ -139,7 +126,7 @@ def test_sunlit_share_and_missing_depth_match_the_occluders_shadow() -> None:
     # (its shadow's edges fall between pixel centres)
     scene = RegimeScene(merge_meshes([_quad((-3, -3, 0), (6, 0, 0), (0, 6, 0)),
                                       _quad((-0.31, -0.31, 3.0), (0.62, 0, 0), (0, 0.62, 0), n=2)]))
-    T = _look_at((0, 0, 1.5), (0, 0, 0), up=(0, 1, 0))
+    T = look_at((0, 0, 1.5), (0, 0, 0), up=(0, 1, 0))
     rgb, depth = _render(scene, T, _plain)
     p = CAMERA.backproject_depth(depth) @ T[:3, :3].T + T[:3, 3]
     shadow = (np.abs(p[..., 0]) < 0.31) & (np.abs(p[..., 1]) < 0.31)
@@ -157,7 +144,7 @@ def test_sunlit_share_and_missing_depth_match_the_occluders_shadow() -> None:
 
 def test_illumination_share_sees_the_sun_patch_not_the_texture() -> None:
     scene = RegimeScene(_quad((-3, -3, 0), (6, 0, 0), (0, 6, 0), _textured, n=150))
-    T = _look_at((0.3, -1.2, 1.5), (0, 0, 0))
+    T = look_at((0.3, -1.2, 1.5), (0, 0, 0))
     rgb, depth = _render(scene, T, lambda p: 0.5 * _textured(p))
     uniform = analyze_frame(rgb, depth, CAMERA, T, scene, SUN_UP, crf=LINEAR)
     rgb, depth = _render(scene, T, lambda p: 0.5 * _textured(p), lambda p: np.where(p[..., 0] > 0.2, 1.8, 0.6))
@@ -168,7 +155,7 @@ def test_illumination_share_sees_the_sun_patch_not_the_texture() -> None:
 
 def test_noise_share_is_one_on_a_noisy_plain_wall_and_small_on_a_clean_texture() -> None:
     scene = RegimeScene(_quad((-3, 0, -1), (6, 0, 0), (0, 0, 4), _textured, n=150))
-    T = _look_at((0.4, 2.0, 1.2), (0, 0, 1))
+    T = look_at((0.4, 2.0, 1.2), (0, 0, 1))
     e_per_x = 2000.0  # Poisson noise only: σ_x² = x / 2000, 4 LSB at x = 0.5
     rgb, depth = _render(scene, T, _plain)
     rng = np.random.default_rng(1)
@@ -208,7 +195,7 @@ def test_bad_input_raises(tmp_path: Path) -> None:
     with pytest.raises(DaylightEvalError):
         analyze_recording(tmp_path)
     scene = RegimeScene(_quad((-3, 0, -1), (6, 0, 0), (0, 0, 4)))
-    rgb, depth = _render(scene, _look_at((0, 2, 1), (0, 0, 1)), _plain)
+    rgb, depth = _render(scene, look_at((0, 2, 1), (0, 0, 1)), _plain)
     with pytest.raises(DaylightEvalError):
         analyze_frame(rgb[:, :-1], depth, CAMERA, np.eye(4), scene, SUN_UP)
     with pytest.raises(DaylightEvalError):
@@ -219,7 +206,7 @@ def test_bad_input_raises(tmp_path: Path) -> None:
 
 def test_table_lists_every_recording() -> None:
     scene = RegimeScene(_quad((-3, 0, -1), (6, 0, 0), (0, 0, 4)))
-    f = _frame(scene, _look_at((0.4, 2.0, 1.2), (0, 0, 1)))
+    f = _frame(scene, look_at((0.4, 2.0, 1.2), (0, 0, 1)))
     text = table_markdown({"A": summarize([f]), "B": summarize([f, f])})
     assert text.splitlines()[0].endswith("| A | B |")
     assert "| frames | 1 | 2 |" in text

@@ -502,3 +502,19 @@ def test_geometry_error_types() -> None:
 def test_invalid_inputs_raise_geometry_error_naming_argument(call: Callable[[], object], name: str) -> None:
     with pytest.raises(GeometryError, match=rf"\b{name}"):
         call()
+
+
+def test_look_at_points_the_optical_axis_and_keeps_x_level() -> None:
+    T = g.look_at([1.0, 2.0, 1.5], [3.0, 2.0, 1.5])  # looking east
+    assert g.is_rotation(T[:3, :3])
+    np.testing.assert_allclose(T[:3, 2], [1.0, 0.0, 0.0], atol=1e-12)  # z forward
+    np.testing.assert_allclose(T[:3, 0], [0.0, -1.0, 0.0], atol=1e-12)  # x right (south), level
+    np.testing.assert_allclose(T[:3, 1], [0.0, 0.0, -1.0], atol=1e-12)  # y down
+    np.testing.assert_allclose(T[:3, 3], [1.0, 2.0, 1.5])
+    rolled = g.look_at([1.0, 2.0, 1.5], [3.0, 2.0, 1.5], roll_rad=np.pi / 2)
+    np.testing.assert_allclose(rolled[:3, 2], T[:3, 2], atol=1e-12)
+    np.testing.assert_allclose(rolled[:3, 0], T[:3, 1], atol=1e-12)  # x turned into the old y
+    down = g.look_at([0.0, 0.0, 2.0], [0.0, 0.0, 0.0])  # along up: still a rotation
+    assert g.is_rotation(down[:3, :3]) and np.allclose(down[:3, 2], [0.0, 0.0, -1.0])
+    with pytest.raises(GeometryError, match="apart"):
+        g.look_at([1.0, 1.0, 1.0], [1.0, 1.0, 1.0])

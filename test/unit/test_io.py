@@ -1,9 +1,11 @@
+import json
 import os
 import stat
 
+import numpy as np
 import pytest
 
-from lightfast.io import atomic_directory, read_versioned_yaml, write_text_atomic
+from lightfast.io import atomic_directory, json_finite, read_versioned_yaml, write_text_atomic
 
 
 def test_write_text_atomic_replaces_and_leaves_no_temp(tmp_path) -> None:
@@ -70,3 +72,12 @@ def test_read_versioned_yaml_missing_file_raises_the_given_error(tmp_path) -> No
     with pytest.raises(_ThingError, match="cannot read"):
         read_versioned_yaml(tmp_path / "nope.yaml", format_name="thing", version=1, error=_ThingError,
                             what="a thing file")
+
+
+
+def test_json_finite_writes_nan_as_null() -> None:
+    doc = {"rate": float("nan"), "runs": [1.0, np.float64("nan"), (2, 3.5)], "name": "x"}
+    assert json.loads(json.dumps(json_finite(doc), allow_nan=False, default=float)) == {
+        "rate": None, "runs": [1.0, None, [2, 3.5]], "name": "x"}
+    with pytest.raises(ValueError):  # an infinity is not a missing value: left to fail loudly
+        json.dumps(json_finite({"x": float("inf")}), allow_nan=False)

@@ -13,11 +13,11 @@ from lightfast.daylight.lighting_map import LightingMapConfig, prepare_lighting_
 from lightfast.daylight.relight import DaylightRelighter, RelightConfig, _apply_response, _response_table
 from lightfast.daylight.sun import FREIBURG
 from lightfast.daylight.sun_update import SunEpochAssembler, sun_radiosity
-from lightfast.geometry import compose, inverse, rotation_angle_deg, se3_exp
+from lightfast.geometry import compose, inverse, look_at, rotation_angle_deg, se3_exp
 from lightfast.sim.validation_rooms import box_room_with_window
 from lightfast.tracking.errors import TrackingError
 from lightfast.tracking.pipeline import RGBDTracker, TrackerConfig
-from test.unit.test_brightness import S_TRUE, look_at
+from test.unit.test_brightness import S_TRUE
 
 CAMERA = PinholeCamera(320, 240, 250.0, 250.0, 159.5, 119.5)
 
@@ -49,7 +49,7 @@ def live_frame(lmap, sun, crf, T):
     return r.rgb8(), r.depth_m
 
 
-T0 = look_at([2.25, 4.3, 1.6], [0.0, -2.8, -1.4])
+T0 = look_at([2.25, 4.3, 1.6], np.add([2.25, 4.3, 1.6], [0.0, -2.8, -1.4]))
 #: The second frame of the two-frame tracker tests: 2.2 cm and 0.6° from T0.
 T1 = compose(T0, se3_exp([0.01, 0.0, 0.02, 0.0, 0.01, 0.0]))
 

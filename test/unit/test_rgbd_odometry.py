@@ -236,7 +236,7 @@ def _reference_terms(src, tgt, T, cfg, use_color, use_depth):
 @pytest.mark.parametrize("use_color,use_depth", [(True, True), (True, False), (False, True)])
 def test_fused_kernel_matches_numpy_normal_equations(scenes, use_color, use_depth, term):
     from lightfast.tracking import prepare_frame
-    from lightfast.tracking.rgbd_odometry.kernels import _linearize
+    from lightfast.tracking.rgbd_odometry.kernels import linearize
 
     a, b = scenes.frame(0), scenes.frame(5)
     src = prepare_frame(b.rgb, b.depth_mm / 1000.0, scenes.camera, config=FAST)
@@ -244,7 +244,7 @@ def test_fused_kernel_matches_numpy_normal_equations(scenes, use_color, use_dept
     T = se3_exp([0.01, -0.005, 0.008, 0.004, -0.006, 0.003])
     cfg = dataclasses.replace(FAST, geometric_term=term)
     for level in range(FAST.pyramid_levels):
-        terms = _linearize(src.levels[level], tgt.levels[level], T, cfg, use_color, use_depth)
+        terms = linearize(src.levels[level], tgt.levels[level], T, cfg, use_color, use_depth)
         H, g, count = _reference_terms(src.levels[level], tgt.levels[level], T, cfg, use_color, use_depth)
         assert abs(terms.count - count) <= max(2, count // 2000)  # float32 vs float64 at the borders
         np.testing.assert_allclose(terms.H, H, rtol=2e-3, atol=1e-6 * np.abs(H).max())

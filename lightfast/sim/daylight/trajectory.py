@@ -18,7 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.interpolate import PchipInterpolator
 
-from lightfast.geometry import inverse, se3_exp, se3_log
+from lightfast.geometry import inverse, look_at, se3_exp, se3_log
 from lightfast.sim.daylight.scene import DaylightScene
 from lightfast.sim.daylight.sensors import DepthSensor
 
@@ -32,20 +32,6 @@ __all__ = [
 #: Limits of the gaze's angular rates (before the hand jitter), like a person panning a hand-held camera.
 MAX_YAW_RATE_DEG_S = 75.0
 MAX_PITCH_RATE_DEG_S = 45.0
-
-
-def _look_at(p: NDArray[np.float64], f: NDArray[np.float64], roll: float) -> NDArray[np.float64]:
-    """T_map_camera (optical: x right, y down, z forward) at ``p`` looking along ``f`` with ``roll`` (rad)."""
-    z = f / np.linalg.norm(f)
-    x = np.cross(z, [0.0, 0.0, 1.0])
-    x /= np.linalg.norm(x)
-    y = np.cross(z, x)
-    c, s = math.cos(roll), math.sin(roll)
-    x, y = c * x + s * y, -s * x + c * y
-    T = np.eye(4)
-    T[:3, :3] = np.stack([x, y, z], axis=1)
-    T[:3, 3] = p
-    return T
 
 
 def _rate_limited(x: NDArray[np.float64], max_step: float) -> NDArray[np.float64]:
@@ -141,7 +127,7 @@ def hand_held_trajectory(scene: DaylightScene, n_frames: int, rate_hz: float, rn
     roll = roll + math.radians(0.17) * jit[:, 2]
     pos = pos + 0.0015 * jit[:, 3:6]
     f = np.stack([np.cos(pitch) * np.cos(yaw), np.cos(pitch) * np.sin(yaw), np.sin(pitch)], axis=1)
-    return np.stack([_look_at(pos[i], f[i], roll[i]) for i in range(n_frames)])
+    return np.stack([look_at(pos[i], pos[i] + f[i], roll_rad=roll[i]) for i in range(n_frames)])
 
 
 def depth_camera_poses(poses: NDArray[np.float64], rate_hz: float, sensor: DepthSensor) -> NDArray[np.float64]:

@@ -29,9 +29,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from lightfast.camera import PinholeCamera
 from lightfast.daylight.mesh import ReflectanceMesh
-from lightfast.geometry import make_transform
+from lightfast.geometry import look_at
 from lightfast.raycast import RayCaster
-from lightfast.sim.racr.builder import unit
 from lightfast.sim.racr.lighting import Lighting
 from lightfast.sim.sky_model import LUMA
 
@@ -49,18 +48,6 @@ def camera_for_size(width: int, height: int) -> PinholeCamera:
     """Kinect-like intrinsics (fx = fy = 525 px at 640 × 480), scaled to ``width × height``."""
     return PinholeCamera(int(width), int(height), 525.0 * width / 640.0, 525.0 * height / 480.0,
                          width / 2.0 - 0.5, height / 2.0 - 0.5)
-
-
-def look_at(position: ArrayLike, target: ArrayLike, up: ArrayLike = (0.0, 0.0, 1.0)) -> F64:
-    """``T_world_cam`` (optical frame: x right, y down, z forward) at ``position`` looking at ``target``."""
-    p, t = np.asarray(position, float), np.asarray(target, float)
-    z = unit(t - p)
-    x = np.cross(z, np.asarray(up, float))
-    if np.linalg.norm(x) < 1e-9:
-        x = np.cross(z, np.array([0.0, 1.0, 0.0]))
-    x = unit(x)
-    y = np.cross(z, x)
-    return make_transform(np.stack([x, y, z], axis=1), p)
 
 
 @dataclass(frozen=True)

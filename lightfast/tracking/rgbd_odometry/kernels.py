@@ -18,7 +18,7 @@ camera, m), ``T = T_target_source``:
 * ρ are Huber norms (``intensity_huber_delta``, ``geometric_huber_delta_m``) realised as IRLS weights, the
   geometric one multiplied by w_G.
 
-Jacobians are taken with respect to a left increment ``ξ = (ρ, φ)`` (m, rad) of ``T``. Output of :func:`_linearize`:
+Jacobians are taken with respect to a left increment ``ξ = (ρ, φ)`` (m, rad) of ``T``. Output of :func:`linearize`:
 ``JᵀWJ`` (6×6), ``JᵀWr`` (6,), the numbers of associated and of inlier pixels and the Huber cost per associated
 pixel.
 """
@@ -172,9 +172,11 @@ _TRIU = np.triu_indices(6)
 _NO_DEPTH_GRAD = np.full((1, 1, 2), np.nan, dtype=np.float32)  # the point-to-plane term does not read it
 
 
-def _linearize(
+def linearize(
     src: _Level, tgt: _Level, T: NDArray[np.float64], cfg: TrackingConfig, use_color: bool, use_depth: bool
 ) -> _Terms:
+    """The normal equations (H, b, cost, inliers) of one pyramid level at ``T = T_tgt_src``: the photometric term
+    (``use_color``) and the geometric term (``use_depth``) of ``cfg``, weighted as the solver weights them."""
     cam = tgt.camera
     intrinsics = np.array([cam.fx, cam.fy, cam.cx, cam.cy], dtype=np.float64)
     depth_difference = cfg.geometric_term == "depth-difference"

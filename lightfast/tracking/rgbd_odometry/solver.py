@@ -29,7 +29,7 @@ from lightfast.camera import PinholeCamera
 from lightfast.geometry import se3_exp, se3_log
 from lightfast.tracking.errors import TrackingInputError
 from lightfast.tracking.rgbd_odometry.config import AlignResult, SequenceTrack, TrackingConfig
-from lightfast.tracking.rgbd_odometry.kernels import _linearize, _Terms
+from lightfast.tracking.rgbd_odometry.kernels import _Terms, linearize
 from lightfast.tracking.rgbd_odometry.pyramid import RGBDFrame, _Level, _prepare, prepare_frame
 
 __all__ = ["align", "align_frames", "track_sequence", "warm_up"]
@@ -58,7 +58,7 @@ def _align_pyramids(
         n_iter = cfg.iterations[cfg.pyramid_levels - 1 - level]
         level_converged = False
         for _ in range(n_iter):
-            terms = _linearize(src[level], tgt[level], T, cfg, use_color, use_depth)
+            terms = linearize(src[level], tgt[level], T, cfg, use_color, use_depth)
             if terms.count < _MIN_CORRESPONDENCES:
                 break
             H, b = terms.H, terms.b
@@ -81,7 +81,7 @@ def _align_pyramids(
             # iteration budget used up: accept if the last step was small relative to the motion scale
             level_converged = terms.count >= _MIN_CORRESPONDENCES and float(np.linalg.norm(xi)) < 1e-3
     # statistics of the last linearisation at the finest level (before its final, small step)
-    final = terms if total_iterations else _linearize(src[finest], tgt[finest], T, cfg, use_color, use_depth)
+    final = terms if total_iterations else linearize(src[finest], tgt[finest], T, cfg, use_color, use_depth)
     n_valid = max(len(src[finest].points), 1)
     inlier_ratio = final.inliers / n_valid
     converged = level_converged and final.count >= _MIN_CORRESPONDENCES and inlier_ratio >= cfg.min_inlier_ratio

@@ -22,7 +22,7 @@ import pytest
 
 from lightfast.camera import PinholeCamera
 from lightfast.config import ConfigError
-from lightfast.geometry import rotation_angle_deg, so3_exp
+from lightfast.geometry import look_at, rotation_angle_deg, so3_exp
 from lightfast.racr import (
     AlignmentError,
     FineAlignmentConfig,
@@ -36,19 +36,6 @@ from lightfast.racr import (
 from lightfast.raycast import RayCaster
 
 HALF_M = 0.6  # half side of the relief
-
-
-def look_at(eye, target, up=(0.0, 1.0, 0.0)) -> np.ndarray:
-    """``T_world_cam`` of a camera at ``eye`` looking at ``target`` (optical frame: z forward, y down)."""
-    eye, target = np.asarray(eye, float), np.asarray(target, float)
-    z = target - eye
-    z /= np.linalg.norm(z)
-    x = np.cross(z, up)
-    x /= np.linalg.norm(x)
-    T = np.eye(4)
-    T[:3, :3] = np.stack([x, np.cross(z, x), z], axis=1)
-    T[:3, 3] = eye
-    return T
 
 
 def similarity(rotvec, t, sigma: float) -> tuple[np.ndarray, float]:
@@ -143,7 +130,7 @@ class Observation:
 
 
 CAMERA = PinholeCamera(160, 120, 140.0, 140.0, 79.5, 59.5)
-T_REF_CAM = look_at([0.05, -0.35, 0.75], [0.0, 0.0, 0.0])
+T_REF_CAM = look_at([0.05, -0.35, 0.75], [0.0, 0.0, 0.0], up=(0.0, 1.0, 0.0))
 
 
 def reference_cloud(scene: ReliefScene, T_ref_cam=T_REF_CAM, camera=CAMERA, noise_m=0.001, seed=1, views=3):
@@ -227,7 +214,7 @@ def errors(result, obs: Observation) -> tuple[float, float, float]:
 
 
 TRUE_T, TRUE_SIGMA = similarity([0.2, -0.1, 0.3], [0.3, -0.2, 0.1], 1.35)
-T_CUR_CAM = look_at([0.1, -0.3, 0.72], [0.02, 0.03, 0.0])  # the current camera (centre of the keyframe circle)
+T_CUR_CAM = look_at([0.1, -0.3, 0.72], [0.02, 0.03, 0.0], up=(0.0, 1.0, 0.0))  # current camera: keyframe circle centre
 DRIFT = {"depth_noise_rel": 0.01, "depth_bias_rel": (0.02, -0.01, 0.015, -0.02)}  # per-keyframe depth bias
 
 
