@@ -22,8 +22,15 @@ def _cmd_eval_daylight(args: argparse.Namespace) -> int:
 
     methods = [m for m in args.methods.split(",") if m]
     sequences = [s for s in args.sequences.split(",") if s] or None
+    tracker = None
+    if args.params_file:
+        from lightfast.config import load_config_yaml
+        from lightfast.tracking.pipeline import TrackerConfig
+
+        tracker = load_config_yaml(TrackerConfig, args.params_file, node_name="rgbd_tracker_node")
     runs = evaluate_daylight(args.sim_dir, args.out, methods=methods, sequences=sequences, maps_dir=args.maps,
-                             max_frames=args.max_frames, progress=sys.stderr.isatty(), jobs=args.jobs)
+                             max_frames=args.max_frames, progress=sys.stderr.isatty(), jobs=args.jobs,
+                             tracker_config=tracker)
     print((args.out / "daylight_table.md").read_text(), end="")
     print(f"{len(runs)} runs; wrote {args.out}")
     return 0
@@ -122,6 +129,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--maps", type=Path, default=None, help="lighting map cache directory (default SIM_DIR/maps)")
     p.add_argument("--max-frames", type=int, default=None, help="evaluate only the first N frames of each recording")
     p.add_argument("--jobs", type=int, default=1, help="parallel worker processes (one recording x method each)")
+    p.add_argument("--params-file", type=Path, default=None,
+                   help="rgbd_tracker_node parameter file for the tracker (default: the node's defaults, "
+                        "config/rgbd_tracker_node.yaml); each method then sets only its mode")
     p.set_defaults(func=_cmd_eval_daylight)
 
     p = ev_sub.add_parser(

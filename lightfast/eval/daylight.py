@@ -40,6 +40,7 @@ from numpy.typing import NDArray
 
 from lightfast.bag.reader import open_bag
 from lightfast.camera import PinholeCamera
+from lightfast.config import config_from_mapping
 from lightfast.daylight.crf import load_crf
 from lightfast.daylight.lighting_map import FORMAT_VERSION as MAP_FORMAT_VERSION
 from lightfast.daylight.lighting_map import LightingMap, LightingMapConfig
@@ -362,10 +363,11 @@ def brightness_correlation(run: SequenceRun, seq_dir: Path) -> float:
 def evaluate_daylight(sim_dir: Path, out_dir: Path, *, methods: Sequence[str] = tuple(METHODS),
                       sequences: Sequence[str] | None = None, maps_dir: Path | None = None,
                       max_frames: int | None = None, progress: bool = True, jobs: int = 1,
-                      map_config: LightingMapConfig | None = None,
+                      map_config: LightingMapConfig | None = None, tracker_config: TrackerConfig | None = None,
                       on_run: Callable[[SequenceRun], None] | None = None) -> list[SequenceRun]:
     """Run ``methods`` over the recordings in ``sim_dir`` and write ``daylight_table.md``, ``daylight_frames.csv``,
-    ``daylight_summary.json`` and PNG plots into ``out_dir``."""
+    ``daylight_summary.json`` and PNG plots into ``out_dir``. ``tracker_config``: the tracker's parameters (the
+    node's defaults if None); each method sets only its ``mode``."""
     for m in methods:
         if m not in METHODS:
             raise DaylightEvalError(f"unknown method {m!r}; choose from {', '.join(METHODS)}")
@@ -382,6 +384,7 @@ def evaluate_daylight(sim_dir: Path, out_dir: Path, *, methods: Sequence[str] = 
     out_dir.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     cfg_dict = None if map_config is None else dataclasses.asdict(map_config)
+    tracker_dict = None if tracker_config is None else tracker_config.to_dict()
     map_meta = {}
     for scene in dict.fromkeys(scene_of(s) for s in seq_dirs):
         meta_path = maps_dir / scene / "metadata.json"
@@ -393,12 +396,12 @@ def evaluate_daylight(sim_dir: Path, out_dir: Path, *, methods: Sequence[str] = 
     todo = []
     for seq in seq_dirs:
         for m in methods:
-            key = _run_key(seq, m, map_meta[scene_of(seq)], max_frames)
+            key = _run_key(seq, m, map_meta[scene_of(seq)], max_frames, tracker_config)
             stored = _load_run(out_dir, seq.name, m, key)
             if stored is not None:
                 runs.append(stored)
             else:
-                todo.append(((str(seq), m, str(maps_dir), max_frames, str(sim_dir), cfg_dict), key))
+                todo.append(((str(seq), m, str(maps_dir), max_frames, str(sim_dir), cfg_dict, tracker_dict), key))
     if runs:
         log.info("%d of %d runs reused from %s", len(runs), len(runs) + len(todo), out_dir / "runs")
 
@@ -438,7 +441,8 @@ def scene_of(seq_dir: Path) -> str:
 CODE = ("daylight", "tracking", "eval/daylight.py", "bag", "geometry", "camera.py", "raycast.py", "config.py")
 
 
-def _run_key(seq_dir: Path, method: str, map_meta: dict, max_frames: int | None) -> str:
+def _run_key(seq_dir: Path, method: str, map_meta: dict, max_frames: int | None,
+             tracker_config: TrackerConfig | None = None) -> str:
     """A hash of everything that decides one run's outcome (:mod:`lightfast.eval.cache`)."""
     _, reference, brightness = METHODS[method]
     parts = {
@@ -447,7 +451,7 @@ def _run_key(seq_dir: Path, method: str, map_meta: dict, max_frames: int | None)
         "code": code_version(*CODE),
         "map": {k: map_meta.get(k) for k in ("mesh_sha256", "config", "site", "version")},
         "method": method,
-        "tracker": dataclasses.asdict(TrackerConfig(mode=METHODS[method][0])),
+        "tracker": dataclasses.asdict(dataclasses.replace(tracker_config or TrackerConfig(), mode=METHODS[method][0])),
         "relight": dataclasses.asdict(RelightConfig(reference=reference, method=brightness)),
         "max_frames": max_frames,
     }
@@ -509,14 +513,14 @@ def _write_outputs(out_dir: Path, runs: Sequence[SequenceRun], methods: list[str
     _plots(out_dir, runs, sim_dir)
 
 
-def _run_job(job: tuple[str, str, str, int | None, str, dict | None]) -> SequenceRun:
+def _run_job(job: tuple[str, str, str, int | None, str, dict | None, dict | None]) -> SequenceRun:
     """Worker of ``--jobs``: one (recording, method) run in its own process."""
-    seq_dir, method, maps_dir, max_frames, sim_dir, map_config = job
+    seq_dir, method, maps_dir, max_frames, sim_dir, map_config, tracker = job
     seq = Path(seq_dir)
     scene = json.loads((seq / "sequence.json").read_text())["sequence"]["scene"]
     lmap = _cached_map(scene, Path(sim_dir), Path(maps_dir), map_config)
-    return run_sequence(seq, lmap, method, max_frames=max_frames, progress=False,
-                        sun_B=_cached_sun(seq, lmap))
+    return run_sequence(seq, lmap, method, max_frames=max_frames, progress=False, sun_B=_cached_sun(seq, lmap),
+                        tracker_config=None if tracker is None else config_from_mapping(TrackerConfig, tracker))
 
 
 _MAPS: dict[str, LightingMap] = {}

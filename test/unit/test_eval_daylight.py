@@ -71,6 +71,15 @@ def test_evaluation_writes_table_csv_json_and_plots(sim_dir: Path, tmp_path: Pat
     short = evaluate_daylight(sim_dir, out, methods=["proposed"], maps_dir=tmp_path / "maps", max_frames=5,
                               progress=False, map_config=MAP, on_run=lambda r: ran.append(r.method))
     assert ran == ["depth-only", "proposed"] and len(short[0].frames) == 5
+    # ... and so is one with other tracker parameters, which reach the tracker (one f2m iteration per level)
+    from lightfast.tracking.pipeline import TrackerConfig
+
+    ran.clear()
+    one = evaluate_daylight(sim_dir, out, methods=["proposed"], maps_dir=tmp_path / "maps", max_frames=5,
+                            progress=False, map_config=MAP, on_run=lambda r: ran.append(r.method),
+                            tracker_config=TrackerConfig(f2m_iterations=(1, 1, 1)))
+    assert ran == ["proposed"]
+    assert not np.allclose(np.array(one[0].T_est), np.array(short[0].T_est), rtol=0, atol=1e-9)
     # ... and so is a recording whose content changed under the same name (another seed or simulator version)
     other = tmp_path / "sim_other"
     shutil.copytree(sim_dir, other)
