@@ -13,6 +13,7 @@ import argparse
 import json
 import sys
 import time
+from dataclasses import asdict
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -26,12 +27,11 @@ def main(argv: list[str] | None = None) -> int:
         SUNLIT_LOSS_IMAGE_SHARE,
         WEAK_EIGEN_RATIO,
         analyze_recording,
-        json_safe,
         summarize,
         table_markdown,
     )
     from lightfast.eval.errors import DaylightEvalError
-    from lightfast.io import write_text_atomic
+    from lightfast.io import json_finite, write_text_atomic
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("sim_dir", type=Path, help="directory of `lightfast sim daylight` recordings")
@@ -69,8 +69,8 @@ def main(argv: list[str] | None = None) -> int:
     out.parent.mkdir(parents=True, exist_ok=True)
     write_text_atomic(out.with_name(out.name + ".md"), header + table)
     doc = {"sim_dir": shown_path(sim_dir), "sequences": wanted, "max_frames": args.max_frames,
-           "summaries": summaries, "frames": {k: list(v) for k, v in frames.items()}}
-    write_text_atomic(out.with_name(out.name + ".json"), json.dumps(json_safe(doc), indent=1) + "\n")
+           "summaries": summaries, "frames": {k: [asdict(f) for f in v] for k, v in frames.items()}}
+    write_text_atomic(out.with_name(out.name + ".json"), json.dumps(json_finite(doc), indent=1) + "\n")
     print(table, end="")
     return 0
 

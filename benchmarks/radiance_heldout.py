@@ -8,9 +8,10 @@
 
 For each room a lighting map is prepared with the defaults of ``lightfast daylight prepare``; its sky, ground and sun
 irradiance (B̂/ρ at mesh vertices) is compared with ``rtrace -I`` (no ambient cache, no ``-as`` super-sampling, see
-:mod:`lightfast.sim.radiance_oracle`) at ``--points`` surface points away from creases plus ``--junction-points``
-points 2 mm – 2 cm from a crease (where parts meet; our values there interpolated from the crease vertices), after
-one best-fit scale per component. Goal: median relative
+:mod:`lightfast.sim.radiance_oracle`) at ``--points`` surface points away from creases (snapped to mesh vertices)
+plus ``--junction-points`` mesh vertices on a crease (where parts meet; Radiance asked 2 mm into the vertex's own
+face, since exactly on the crease its query point would see through the other surface), after one best-fit scale
+per component. Goal: median relative
 error <= 10 %, Pearson r >= 0.98, best-fit scale within 5 % of 1, every component. Reported over all points, and
 for the junction points alone.
 
@@ -24,7 +25,6 @@ from __future__ import annotations
 import argparse
 import datetime as dt
 import json
-import math
 import sys
 import time
 from dataclasses import dataclass
@@ -40,7 +40,7 @@ from lightfast.daylight.lighting_map import LightingMapConfig, prepare_lighting_
 from lightfast.daylight.mesh import ReflectanceMesh, load_ply  # noqa: E402
 from lightfast.daylight.sun import Site, sun_position  # noqa: E402
 from lightfast.eval.radiosity_validation import TARGET_MEDIAN, TARGET_R, Agreement, compare_with_radiance  # noqa: E402
-from lightfast.io import write_text_atomic  # noqa: E402
+from lightfast.io import json_finite, write_text_atomic  # noqa: E402
 
 TARGET_SCALE = 0.05
 
@@ -143,8 +143,9 @@ def _table(results: dict[str, dict[str, Any]], args: argparse.Namespace) -> str:
     return "\n".join([
         f"# Normalized radiosity vs Radiance: {args.label}",
         "",
-        f"Per room: {args.points} surface points away from creases + {args.junction_points} 2 mm – 2 cm from one "
-        "(the former snapped to mesh vertices, the latter interpolated from their triangle), lighting map defaults; "
+        f"Per room: {args.points} surface points away from creases, snapped to mesh vertices, + "
+        f"{args.junction_points} mesh vertices on a crease (junctions; Radiance asked 2 mm into the vertex's own "
+        "face), lighting map defaults; "
         "Radiance `rtrace -I -ab 8 -ad 2048 -aa 0 -as 0`, "
         f"{args.repeats} samples per point, the sun as 19 sub-disks of its 0.533° disk. Irradiance after one best-fit "
         "scale per component. Goal: median relative error <= 10 %, Pearson r >= 0.98, scale within 5 % of 1. "
@@ -172,6 +173,7 @@ def main() -> int:
     p.add_argument("--junction-points", type=int, default=50)
     p.add_argument("--repeats", type=int, default=4, help="rtrace samples averaged per point (>= 2: its noise too)")
     p.add_argument("--seed", type=int, default=1, help="seed of the point sampling")
+    p.add_argument("--room", type=int, action="append", help="only this room seed of --rooms (repeatable)")
     p.add_argument("--tessellation", type=float, default=0.05, help="edge length of generated rooms, m")
     p.add_argument("--work", type=Path, help="keep each finished room here; a later call skips it (resumable)")
     p.add_argument("--save-points", type=Path, help="folder for one npz per room: points, ours, Radiance's")
@@ -198,6 +200,8 @@ def main() -> int:
 
         args.label = f"{args.rooms} rooms"
         for seed, site_name, time_text in ROOM_SETS[args.rooms]:
+            if args.room and seed not in args.room:
+                continue
             site, when = _SITES[site_name], _parse_time(time_text)
             wall = window_wall(float(sun_position(site, when).azimuth_deg))
             mesh = random_room(seed, window_wall=wall, tessellation_m=args.tessellation)
@@ -222,7 +226,8 @@ def main() -> int:
     write_text_atomic(stem.with_suffix(".md"), text)
     payload = {"command": args.command, "goal": {"median_rel_err": TARGET_MEDIAN, "pearson_r": TARGET_R,
                                                  "scale_within": TARGET_SCALE}, "rooms": results}
-    write_text_atomic(stem.with_suffix(".json"), json.dumps(_finite(payload), indent=2, default=_json_default) + "\n")
+    write_text_atomic(stem.with_suffix(".json"),
+                      json.dumps(json_finite(payload), indent=2, default=_json_default) + "\n")
     return 0
 
 
@@ -230,17 +235,6 @@ def _json_default(x: Any) -> Any:
     if isinstance(x, np.generic):
         return x.item()
     raise TypeError(type(x))
-
-
-def _finite(x: Any) -> Any:
-    """NaN (e.g. Radiance's noise from one sample) as JSON null."""
-    if isinstance(x, dict):
-        return {k: _finite(v) for k, v in x.items()}
-    if isinstance(x, list | tuple):
-        return [_finite(v) for v in x]
-    if isinstance(x, float) and math.isnan(x):
-        return None
-    return x
 
 
 if __name__ == "__main__":

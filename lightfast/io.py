@@ -125,12 +125,14 @@ def read_json_mapping(path: str | os.PathLike[str], *, error: type[Exception], w
 
 
 def json_finite(x: Any) -> Any:
-    """``x`` (nested dicts, lists, tuples, numbers) with every NaN replaced by ``None``, so that ``json.dumps``
-    writes standard JSON (``null``) instead of the non-standard ``NaN`` (e.g. a rate over no runs)."""
+    """``x`` (nested dicts, lists, tuples, numbers) with NumPy scalars as Python ones and every non-finite float
+    (NaN: a rate over no runs; inf) as ``None``, so that ``json.dumps`` writes standard JSON (``null``)."""
     if isinstance(x, dict):
         return {k: json_finite(v) for k, v in x.items()}
     if isinstance(x, list | tuple):
         return [json_finite(v) for v in x]
-    if isinstance(x, float | np.floating) and np.isnan(x):
+    if isinstance(x, np.generic):
+        x = x.item()
+    if isinstance(x, float) and not np.isfinite(x):
         return None
     return x

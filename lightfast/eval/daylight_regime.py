@@ -33,7 +33,7 @@ from __future__ import annotations
 import csv
 import json
 import math
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -56,7 +56,7 @@ from lightfast.tracking.pipeline import TrackerConfig
 from lightfast.tracking.rgbd_odometry import prepare_frame
 from lightfast.tracking.rgbd_odometry.kernels import linearize
 
-__all__ = ["FrameRegime", "RegimeScene", "analyze_frame", "analyze_recording", "conditioning", "json_safe",
+__all__ = ["FrameRegime", "RegimeScene", "analyze_frame", "analyze_recording", "conditioning",
            "load_scene", "motion_errors", "point_to_plane_information", "summarize", "table_markdown",
            "weak_direction_information"]
 
@@ -430,16 +430,3 @@ def table_markdown(summaries: dict[str, dict[str, Any]]) -> str:
         lines.append(f"| {label} | " + " | ".join(f"{100 * summaries[s][key]:.1f}" for s in names) + " |")
     lines.append("| frames | " + " | ".join(str(summaries[s]["frames"]) for s in names) + " |")
     return "\n".join(lines) + "\n"
-
-
-def json_safe(obj: Any) -> Any:
-    """``obj`` with frame records as dicts and non-finite floats as None (strict JSON)."""
-    if isinstance(obj, FrameRegime):
-        return json_safe(asdict(obj))
-    if isinstance(obj, dict):
-        return {k: json_safe(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
-        return [json_safe(v) for v in obj]
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return None
-    return obj

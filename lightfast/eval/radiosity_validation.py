@@ -84,24 +84,26 @@ def compare_with_radiance(mesh: ReflectanceMesh, *, points: int, seed: int, repe
     """Prepare a lighting map of ``mesh`` (or take ``lmap``) and compare its sky, ground and sun irradiance with
     Radiance (see :mod:`lightfast.sim.radiance_oracle`) at ``points`` surface points away from creases, snapped to
     mesh vertices unless ``at_vertices`` is False (then our values are interpolated inside triangles, which blurs
-    shadow edges over a triangle), followed by ``junction_points`` points 2 mm – 2 cm from a crease (where parts
-    meet: issue 21) where our values are interpolated from the triangle's vertices, those on the crease included.
+    shadow edges over a triangle), followed by ``junction_points`` mesh vertices on a crease (where parts meet:
+    issue 21), ours at the vertex and Radiance's 2 mm into the vertex's own face
+    (:func:`~lightfast.sim.validation_rooms.sample_crease_vertices`).
     ``sun_direction``: unit vector to the sun in the mesh frame; ``site`` only names where the map is prepared (the
     normalized components do not depend on it). With ``repeats >= 2`` each agreement carries Radiance's own noise."""
     from lightfast.daylight.sun import FREIBURG
     from lightfast.daylight.sun_update import sun_radiosity
     from lightfast.sim.radiance_oracle import radiance_irradiance, radiance_irradiance_with_error
-    from lightfast.sim.validation_rooms import sample_surface_points
+    from lightfast.sim.validation_rooms import sample_crease_vertices, sample_surface_points
 
     if lmap is None:
         lmap = prepare_lighting_map(mesh, site or FREIBURG, config, progress=progress)
     pts, nrm = sample_surface_points(mesh, points, seed=seed)
     if at_vertices:
         pts, nrm = snap_to_vertices(lmap, pts, nrm)
-    if junction_points:  # 2 mm – 2 cm from a crease, never snapped: our values interpolated from the crease vertices
-        jp, jn = sample_surface_points(mesh, junction_points, seed=seed + 1, near_edges_only_m=0.02,
-                                       exclude_near_edges_m=0.002)
+    crease_ids = np.zeros(0, dtype=np.int64)
+    if junction_points:  # crease vertices: ours at the vertex, Radiance's just inside the vertex's own face
+        crease_ids, jp, jn = sample_crease_vertices(mesh, junction_points, seed=seed + 1)
         pts, nrm = np.concatenate([pts, jp]), np.concatenate([nrm, jn])
+    regular = len(pts) - len(crease_ids)
     sun = np.asarray(sun_direction, dtype=np.float64)
     ours: dict[Component, NDArray[np.float32]] = {
         "sky": lmap.sky_radiosity, "ground": lmap.ground_radiosity, "sun": sun_radiosity(lmap, sun)}
@@ -115,6 +117,7 @@ def compare_with_radiance(mesh: ReflectanceMesh, *, points: int, seed: int, repe
             noise = float(np.median(se.mean(axis=1) / np.maximum(ref.mean(axis=1), 1e-12)))
         else:
             ref = radiance_irradiance(mesh, pts, nrm, **kwargs)  # type: ignore[arg-type]
-        out[component] = replace(Agreement.of(irradiance_at_points(lmap, radiosity, pts, nrm), ref), points_m=pts,
-                                 normals=nrm, reference_noise=noise)
+        e_crease = radiosity[crease_ids] / np.maximum(mesh.reflectance[crease_ids], 1e-6)
+        e_ours = np.concatenate([irradiance_at_points(lmap, radiosity, pts[:regular], nrm[:regular]), e_crease])
+        out[component] = replace(Agreement.of(e_ours, ref), points_m=pts, normals=nrm, reference_noise=noise)
     return out

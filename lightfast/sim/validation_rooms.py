@@ -510,3 +510,73 @@ def sample_surface_points(
     if have < n:
         raise ValidationRoomError(f"found only {have} of {n} acceptable surface points after {max_rounds} rounds")
     return np.concatenate(got_p)[:n], np.concatenate(got_n)[:n]
+
+
+def sample_crease_vertices(
+    mesh: ReflectanceMesh,
+    n: int,
+    *,
+    seed: int,
+    within_m: float = 1e-3,
+    inset_m: float = 2e-3,
+    batch: int = 512,
+) -> tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.float64]]:
+    """``n`` mesh vertices on a crease (within ``within_m`` of a triangle in another plane or of an open mesh edge:
+    where parts meet, issue 21, or where the mesh ends), each with a reference query point ``inset_m`` from it
+    towards the centroid of one of its incident faces, in that face's plane, and the face's normal.
+
+    The method's radiosity is defined at the vertex; a reference renderer cannot be asked exactly there (its query
+    point would lie in the other surface's plane and see through it), so it is asked just inside the vertex's own
+    face. Query points that no light reaches (:func:`_hidden`) or that are closer than ``inset_m / 8`` to a crease
+    are skipped, as is a vertex with no such face.
+
+    Returns:
+        ``(vertex_ids (n,), query_points_m (n, 3), normals (n, 3))``.
+
+    Raises:
+        ValidationRoomError: the mesh has fewer than ``n`` such vertices.
+    """
+    if n < 0:
+        raise ValidationRoomError(f"n must be >= 0, got {n}")
+    if not 0 < inset_m / 8 < inset_m or within_m <= 0:
+        raise ValidationRoomError("within_m and inset_m must be positive")
+    rng = np.random.default_rng(seed)
+    v, f, fn = mesh.vertices_m, mesh.faces, mesh.face_normals
+    centroid = v[f].mean(axis=1)
+    # incident faces per vertex, as a CSR list
+    order = np.argsort(f.reshape(-1), kind="stable")
+    face_of = order // 3
+    start = np.searchsorted(f.reshape(-1)[order], np.arange(mesh.num_vertices + 1))
+    caster = RayCaster(v, f)
+    ids: list[int] = []
+    qs: list[NDArray[np.float64]] = []
+    ns: list[NDArray[np.float64]] = []
+    perm = rng.permutation(mesh.num_vertices)
+    for s in range(0, mesh.num_vertices, batch):
+        if len(ids) >= n:
+            break
+        cand = perm[s : s + batch]
+        has_face = start[cand + 1] > start[cand]
+        cand = cand[has_face]
+        first_face = face_of[start[cand]]
+        cand = cand[_near_creases(mesh, v[cand], first_face, within_m)]
+        counts = start[cand + 1] - start[cand]
+        pair_v = np.repeat(cand, counts)  # every (vertex, incident face) pair of the batch
+        pair_f = face_of[np.concatenate([np.arange(start[c], start[c + 1]) for c in cand])] if len(cand) else cand
+        d = centroid[pair_f] - v[pair_v]
+        q = v[pair_v] + inset_m * d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-300)
+        ok = ~_near_creases(mesh, q, pair_f, inset_m / 8)
+        ok[ok] = ~_hidden(caster, fn, q[ok], fn[pair_f[ok]], rng)
+        seen: set[int] = set()
+        for k in np.flatnonzero(ok):  # the first usable face of each vertex, in the batch's random order
+            if int(pair_v[k]) in seen:
+                continue
+            seen.add(int(pair_v[k]))
+            ids.append(int(pair_v[k]))
+            qs.append(q[k])
+            ns.append(fn[pair_f[k]])
+            if len(ids) >= n:
+                break
+    if len(ids) < n:
+        raise ValidationRoomError(f"found only {len(ids)} of {n} crease vertices")
+    return np.asarray(ids, dtype=np.int64), np.asarray(qs).reshape(-1, 3), np.asarray(ns).reshape(-1, 3)

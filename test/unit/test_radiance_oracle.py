@@ -23,7 +23,13 @@ from lightfast.sim.radiance_oracle import (
     radiance_irradiance_with_error,
     scene_description,
 )
-from lightfast.sim.validation_rooms import box_room_with_window, furnished_room, random_room, sample_surface_points
+from lightfast.sim.validation_rooms import (
+    box_room_with_window,
+    furnished_room,
+    random_room,
+    sample_crease_vertices,
+    sample_surface_points,
+)
 
 pytestmark = pytest.mark.skipif(
     not radiance_available(), reason="Radiance binaries (oconv, rtrace from pyradiance) not found"
@@ -316,6 +322,27 @@ def test_random_room_is_closed_furnished_and_sampled_where_light_reaches(seed: i
                    | ((np.abs(pts[:, 1]) < 1e-9) & (nrm[:, 1] < -0.99))
                    | ((np.abs(pts[:, 1] - Y) < 1e-9) & (nrm[:, 1] > 0.99)))
         assert not np.any(outward)  # no cabinet back pressed against a wall
+
+
+def test_crease_vertices_lie_on_a_crease_and_their_query_points_inside_their_own_face() -> None:
+    m = furnished_room(tessellation_m=0.25)
+    ids, q, n = sample_crease_vertices(m, 40, seed=3)
+    ids2, q2, _ = sample_crease_vertices(m, 40, seed=3)
+    assert np.array_equal(ids, ids2) and np.array_equal(q, q2)  # deterministic
+    assert len(set(ids.tolist())) == 40
+    v = m.vertices_m[ids]
+    np.testing.assert_allclose(np.linalg.norm(q - v, axis=1), 2e-3, atol=1e-9)
+    np.testing.assert_allclose(np.sum((q - v) * n, axis=1), 0.0, atol=1e-12)  # in the vertex's own face's plane
+    tri = m.vertices_m[m.faces]
+    edges = np.sort(np.concatenate([m.faces[:, [0, 1]], m.faces[:, [1, 2]], m.faces[:, [2, 0]]]), axis=1)
+    uniq, count = np.unique(edges, axis=0, return_counts=True)
+    assert np.all(np.isin(ids, uniq[count == 1]))  # parts are not welded: each on its part's border
+    lo, hi = tri.min(axis=1) - 1e-3, tri.max(axis=1) + 1e-3
+    other_plane_within_1mm = [np.any((np.abs(m.face_normals @ nrm) < 0.999) & np.all((p >= lo) & (p <= hi), axis=1))
+                              for p, nrm in zip(v, n, strict=True)]  # brute force (box test)
+    assert np.mean(other_plane_within_1mm) > 0.8  # nearly all where parts meet; the rest where the mesh ends
+    with pytest.raises(ValidationRoomError, match="crease vertices"):
+        sample_crease_vertices(box_room_with_window(tessellation_m=1.0), 10_000, seed=0)
 
 
 def test_room_parameter_errors() -> None:

@@ -25,8 +25,8 @@ from typing import Any
 
 import numpy as np
 
-from lightfast.eval.vtr.scoring import REPORTED_SOURCES, FrameRecord, RepeatRun, cdf, json_safe, overall
-from lightfast.io import write_text_atomic
+from lightfast.eval.vtr.scoring import REPORTED_SOURCES, FrameRecord, RepeatRun, cdf, overall
+from lightfast.io import json_finite, write_text_atomic
 
 #: The runs of the paper's Fig. 7.
 FIG7_RUNS = ("repeat04", "repeat07")
@@ -255,7 +255,7 @@ def write_outputs(out_dir: Path, runs: Sequence[RepeatRun], modes: Sequence[str]
     _write_frames_csv(out_dir / "vtr_frames.csv", runs)
     summary = {"meta": meta, "modes": list(modes), "runs": [r.summary() for r in runs],
                "overall": {m: overall(runs, m) for m in modes}, "verdict": verdict(runs, modes)}
-    write_text_atomic(out_dir / "vtr_summary.json", json.dumps(json_safe(summary), indent=1) + "\n")
+    write_text_atomic(out_dir / "vtr_summary.json", json.dumps(json_finite(summary), indent=1) + "\n")
     written += [out_dir / "vtr_runs.csv", out_dir / "vtr_frames.csv", out_dir / "vtr_summary.json"]
     if names:
         _plot_cdfs(out_dir / "vtr_cdf.png", runs, names, limit_m,

@@ -36,9 +36,9 @@ from lightfast.eval.cache import code_version, content_digest, run_key
 from lightfast.eval.errors import VtrEvalError
 from lightfast.eval.vtr.inputs import SimRun, Truth, load_truth, sim_runs, stereo_frames
 from lightfast.eval.vtr.report import write_outputs
-from lightfast.eval.vtr.scoring import REPORTED_SOURCES, FrameRecord, RepeatRun, json_safe
+from lightfast.eval.vtr.scoring import REPORTED_SOURCES, FrameRecord, RepeatRun
 from lightfast.geometry import rotation_angle_deg
-from lightfast.io import write_text_atomic
+from lightfast.io import json_finite, write_text_atomic
 from lightfast.progress import track
 from lightfast.vtr.localizer_config import VtrLocalizerConfig
 from lightfast.vtr.map_store import MapStore, TeachMap
@@ -242,7 +242,7 @@ def evaluate_vtr(sim_dir: Path, out_dir: Path, *, modes: Sequence[str] = MODES, 
 
     def finished(res: RepeatRun, key: str) -> None:
         write_text_atomic(runs_dir / f"{res.run}.{res.mode}.json",
-                          json.dumps(json_safe({"key": key, "result": res.to_json()})) + "\n")
+                          json.dumps(json_finite({"key": key, "result": res.to_json()})) + "\n")
         results.append(res)
         results.sort(key=lambda x: (order.index(x.run), list(modes).index(x.mode)))
         meta.update(generated=time.strftime("%Y-%m-%dT%H:%M:%S%z"), seconds=time.perf_counter() - t0)

@@ -181,18 +181,6 @@ def _from_json(v: Any) -> Any:
     return math.nan if v is None else v
 
 
-def json_safe(v: Any) -> Any:
-    if isinstance(v, float) and not math.isfinite(v):
-        return None
-    if isinstance(v, dict):
-        return {k: json_safe(x) for k, x in v.items()}
-    if isinstance(v, (list, tuple)):
-        return [json_safe(x) for x in v]
-    if isinstance(v, np.generic):
-        return json_safe(v.item())
-    return v
-
-
 def overall(runs: Sequence[RepeatRun], mode: str) -> dict[str, Any]:
     """Autonomy by distance over all repeats of a mode (distance-weighted; published and strict), false accepts,
     failures, worst distance on VO."""
