@@ -18,7 +18,7 @@ from lightfast.ros.convert import image_to_numpy, pose_stamped_to_matrix, stamp_
 from lightfast.sim.daylight.irradiance_cache import CacheSettings, IrradianceCache
 from lightfast.sim.daylight.recordings import COLOR_TOPIC, DEPTH_TOPIC, GT_POSE_TOPIC, generate_daylight_set
 from lightfast.sim.daylight.renderer import GroundTruthRenderer
-from lightfast.sim.daylight.rooms import make_ds1, make_ds2
+from lightfast.sim.daylight.rooms import make_ds1, make_ds2, make_ds3
 from lightfast.sim.daylight.scene import RHO_MAX, RHO_MIN
 from lightfast.sim.daylight.sensors import CameraResponse, DepthSensor
 from lightfast.sim.daylight.sequences import camera_for_size, cloud_transmittance
@@ -65,7 +65,7 @@ def _sun(el_deg: float, az_deg: float = 180.0) -> tuple[float, float, float]:
 # --- scenes --------------------------------------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("make", [make_ds1, make_ds2])
+@pytest.mark.parametrize("make", [make_ds1, make_ds2, make_ds3])
 def test_scene_is_valid_and_faces_point_into_the_room(make) -> None:
     scene = make(resolution_m=0.1)
     mesh = scene.mesh
@@ -82,6 +82,13 @@ def test_scene_is_valid_and_faces_point_into_the_room(make) -> None:
     assert hits.hit.mean() > 0.97  # closed room but for the window
     w = scene.window
     assert w.area_m2 == pytest.approx(1.7 * 1.5)
+
+
+def test_ds3_is_drawn_from_its_seed() -> None:
+    a, b, c = make_ds3(resolution_m=0.1), make_ds3(resolution_m=0.1), make_ds3(resolution_m=0.1, seed=4)
+    assert np.array_equal(a.mesh.vertices_m, b.mesh.vertices_m) and a.obstacles == b.obstacles
+    assert a.obstacles != c.obstacles
+    assert a.name == "DS3" and len(a.obstacles) == 3
 
 
 def test_default_ds1_vertex_budget_and_texture() -> None:

@@ -8,6 +8,7 @@ inside the outer wall plane, which casts the sharp shadows the paper uses (Fig. 
 * :func:`make_ds1` — richly textured and furnished: wooden plank floor, a rug, a table, two chairs, a book shelf
   full of book-like boxes, a sideboard, cardboard boxes, posters/pictures and a calendar, a door, a radiator.
 * :func:`make_ds2` — nearly textureless: uniform matte walls, floor and ceiling, a radiator and one plain cabinet.
+* :func:`make_ds3` — a sparsely furnished living room drawn from a seed (held-out: never used in development).
 
 Reflectance comes from :mod:`lightfast.sim.daylight.textures`. Every surface is a regular grid of triangles whose
 spacing follows the texture: ``resolution_m`` (default 2 cm) on furniture and floor, half of it on posters, 3/4 on
@@ -46,6 +47,7 @@ from lightfast.sim.daylight.textures import (
 __all__ = [
     "make_ds1",
     "make_ds2",
+    "make_ds3",
     "make_scene",
 ]
 
@@ -403,9 +405,75 @@ def make_ds2(*, resolution_m: float = 0.02, site: Site = FREIBURG, seed: int = 2
     return DaylightScene("DS2", mesh, window, ROOM_SIZE_M, site, (Box(lo, tuple(np.add(lo, size))),), r)
 
 
+def make_ds3(*, resolution_m: float = 0.02, site: Site = FREIBURG, seed: int = 3) -> DaylightScene:
+    """A sparsely furnished living room, never used in development (the held-out room of issue 21): matte painted
+    walls with faint roller marks, a floor of large pale tiles, a low sofa against the west wall with a picture
+    above it, a plain coffee table and a wardrobe against the east wall; colours, sizes and places are drawn from
+    ``seed``. In texture and geometry it lies between DS1 and DS2."""
+    r = float(resolution_m)
+    rng = np.random.default_rng(seed)
+    W = ROOM_SIZE_M[0]
+    win = _WindowSpec()
+    paint = tuple(float(c) for c in rng.uniform(0.66, 0.8) * np.array([1.0, rng.uniform(0.95, 1.0),
+                                                                            rng.uniform(0.86, 0.97)]))
+    tile = float(rng.choice([0.45, 0.6]))
+    tile_col = tuple(float(c) for c in rng.uniform(0.5, 0.62) * np.array([1.0, 0.97, 0.92]))
+    tiles_noise = noisy(tile_col, 0.04, 0.2, seed + 2)
+
+    def tiles(u: NDArray[np.float64], v: NDArray[np.float64]) -> NDArray[np.float64]:
+        out = tiles_noise(u, v)
+        grout = (np.abs((u + 0.5 * tile) % tile - 0.5 * tile) < 0.004) | (np.abs((v + 0.5 * tile) % tile - 0.5 * tile)
+                                                                           < 0.004)
+        out[grout] *= 0.6
+        return out
+
+    parts, window = _room_shell(
+        r, wall_tex=noisy(paint, 0.035, 0.4, seed + 1), floor_tex=tiles, ceiling_tex=uniform((0.8, 0.8, 0.78)),
+        wall_step=1.5 * r, ceiling_step=2.5 * r, win=win, frame_tex=uniform((0.74, 0.74, 0.72)))
+    parts.extend(_radiator(1.5 * r, win.x0 + 0.1, win.x1 - win.x0 - 0.2, plain=True))
+    obstacles: list[Box] = []
+
+    def add_box(lo: Sequence[float], size: Sequence[float], tex: Texture | dict[str, Texture], *,
+                obstacle: bool = True) -> None:
+        parts.extend(_box(lo, size, r, tex, bottom=False))
+        if obstacle:
+            obstacles.append(Box(cast(tuple[float, float, float], tuple(lo)),
+                                 cast(tuple[float, float, float], tuple(np.add(lo, size)))))
+
+    # sofa against the west wall: seat block, back, two arms, in one fabric
+    fabric_col = tuple(float(c) for c in rng.uniform(0.15, 0.55, 3))
+    fabric = noisy(fabric_col, 0.12, 0.02, seed + 3)
+    sy, sl = float(rng.uniform(1.3, 2.1)), float(rng.uniform(1.7, 2.1))
+    add_box((0.22, sy + 0.15, 0.0), (0.68, sl - 0.3, 0.42), fabric, obstacle=False)
+    add_box((0.005, sy, 0.0), (0.22, sl, 0.82), fabric, obstacle=False)
+    add_box((0.22, sy, 0.0), (0.7, 0.15, 0.6), fabric, obstacle=False)
+    add_box((0.22, sy + sl - 0.15, 0.0), (0.7, 0.15, 0.6), fabric, obstacle=False)
+    obstacles.append(Box((0.0, sy, 0.0), (0.92, sy + sl, 0.82)))
+    # a picture above it, 2 mm off the wall
+    pw, ph = float(rng.uniform(0.6, 1.0)), float(rng.uniform(0.45, 0.7))
+    add_box((0.002, sy + 0.5 * (sl - pw), 1.2), (0.015, pw, ph),
+            {"px": printed(pw, ph, seed + 4), "side": uniform((0.15, 0.12, 0.1))}, obstacle=False)
+    # a plain coffee table in front of the sofa
+    tx, ty = float(rng.uniform(1.25, 1.6)), sy + 0.5 * sl - 0.45
+    table_col = tuple(float(c) for c in rng.uniform(0.25, 0.75) * np.array([1.0, 0.9, 0.8]))
+    add_box((tx, ty, 0.0), (0.55, 0.9, 0.42), uniform(table_col))
+    # a wardrobe against the east wall: plain doors with one seam
+    wy, ww = float(rng.uniform(1.9, 3.3)), float(rng.uniform(1.0, 1.4))
+    ward_col = tuple(float(c) for c in rng.uniform(0.55, 0.85) * np.array([1.0, 0.97, 0.93]))
+
+    def doors(u: NDArray[np.float64], v: NDArray[np.float64]) -> NDArray[np.float64]:
+        out = rgb(ward_col, len(u))
+        out[np.abs(v - 0.5 * ww) < 0.004] *= 0.5  # nx face: u up, v along y
+        return out
+
+    add_box((W - 0.6, wy, 0.0), (0.595, ww, 2.05), {"nx": doors, "side": uniform(ward_col)})
+    mesh = _finish(parts)
+    return DaylightScene("DS3", mesh, window, ROOM_SIZE_M, site, tuple(obstacles), r)
+
+
 def make_scene(name: str, *, resolution_m: float = 0.02, site: Site = FREIBURG) -> DaylightScene:
-    """``"DS1"`` or ``"DS2"``."""
-    makers = {"DS1": make_ds1, "DS2": make_ds2}
+    """``"DS1"``, ``"DS2"`` or ``"DS3"`` (the held-out room)."""
+    makers = {"DS1": make_ds1, "DS2": make_ds2, "DS3": make_ds3}
     if name not in makers:
         raise ValueError(f"unknown scene {name!r}; choose one of {sorted(makers)}")
     return makers[name](resolution_m=resolution_m, site=site)
