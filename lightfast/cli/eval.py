@@ -18,7 +18,7 @@ def _csv_list(text: str) -> list[str]:
 
 
 def _cmd_eval_daylight(args: argparse.Namespace) -> int:
-    from lightfast.eval.daylight import evaluate_daylight
+    from lightfast.eval.daylight import InputChange, evaluate_daylight
 
     methods = [m for m in args.methods.split(",") if m]
     sequences = [s for s in args.sequences.split(",") if s] or None
@@ -30,7 +30,8 @@ def _cmd_eval_daylight(args: argparse.Namespace) -> int:
         tracker = load_config_yaml(TrackerConfig, args.params_file, node_name="rgbd_tracker_node")
     runs = evaluate_daylight(args.sim_dir, args.out, methods=methods, sequences=sequences, maps_dir=args.maps,
                              max_frames=args.max_frames, progress=sys.stderr.isatty(), jobs=args.jobs,
-                             tracker_config=tracker)
+                             tracker_config=tracker,
+                             inputs=InputChange(frame_step=args.frame_step, depth_hole_grow_px=args.depth_hole_grow))
     print((args.out / "daylight_table.md").read_text(), end="")
     print(f"{len(runs)} runs; wrote {args.out}")
     return 0
@@ -132,6 +133,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--params-file", type=Path, default=None,
                    help="rgbd_tracker_node parameter file for the tracker (default: the node's defaults, "
                         "config/rgbd_tracker_node.yaml); each method then sets only its mode")
+    p.add_argument("--frame-step", type=int, default=1,
+                   help="what-if: track every k-th frame only (30/k Hz); default 1, the recording as it is")
+    p.add_argument("--depth-hole-grow", type=int, default=0, metavar="PX",
+                   help="what-if: grow every region without depth by PX pixels; default 0")
     p.set_defaults(func=_cmd_eval_daylight)
 
     p = ev_sub.add_parser(

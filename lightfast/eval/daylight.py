@@ -55,8 +55,8 @@ from lightfast.progress import track
 from lightfast.topics import COLOR_INFO_TOPIC, COLOR_TOPIC, DEPTH_TOPIC, GT_POSE_TOPIC
 from lightfast.tracking.pipeline import RGBDTracker, TrackerConfig
 
-__all__ = ["METHODS", "FrameRecord", "SequenceRun", "evaluate_daylight", "recording_frames", "run_sequence", "scene_of",
-           "sequence_files"]
+__all__ = ["METHODS", "FrameRecord", "InputChange", "SequenceRun", "evaluate_daylight", "recording_frames",
+           "run_sequence", "scene_of", "sequence_files"]
 
 log = logging.getLogger(__name__)
 
@@ -72,6 +72,37 @@ METHODS: dict[str, tuple[str, str, str]] = {
 PROTOCOL_VERSION = 3
 LOSS_TRANSLATION_M = 0.10
 LOSS_ROTATION_DEG = 10.0
+
+
+@dataclass(frozen=True)
+class InputChange:
+    """What-if changes to a recording's input, for measuring why methods do (not) separate (issue 21, point 5).
+    The defaults leave the recording as it is; ground truth and the protocol are unchanged.
+
+    * ``frame_step``: track every k-th frame only (30/k Hz: larger motion between frames, a constant-velocity
+      prediction that is k² times further off for the same acceleration);
+    * ``depth_hole_grow_px``: grow every region without depth by this many pixels (a depth camera that loses more
+      than the directly sunlit pixels, as structured light does near bright areas).
+    """
+
+    frame_step: int = 1
+    depth_hole_grow_px: int = 0
+
+    def __post_init__(self) -> None:
+        if not 1 <= self.frame_step <= 30 or not 0 <= self.depth_hole_grow_px <= 100:
+            raise DaylightEvalError(f"frame_step must be in [1, 30] and depth_hole_grow_px in [0, 100], got "
+                                    f"{self.frame_step} and {self.depth_hole_grow_px}")
+
+    def depth(self, depth_m: NDArray[np.float32]) -> NDArray[np.float32]:
+        """``depth_m`` with its holes grown (0 = no depth)."""
+        if self.depth_hole_grow_px == 0:
+            return depth_m
+        import cv2
+
+        hole = (~(np.isfinite(depth_m) & (depth_m > 0))).astype(np.uint8)
+        k = 2 * self.depth_hole_grow_px + 1
+        grown = cv2.dilate(hole, np.ones((k, k), np.uint8)).astype(bool)
+        return np.where(grown, np.float32(0.0), depth_m).astype(np.float32)
 
 
 @dataclass(frozen=True)
@@ -159,8 +190,9 @@ def sequence_sun_radiosity(seq_dir: Path, lmap: LightingMap) -> NDArray[np.float
 
 def run_sequence(seq_dir: Path, lmap: LightingMap, method: str, *, max_frames: int | None = None,
                  progress: bool = True, sun_B: NDArray[np.float32] | None = None,
-                 tracker_config: TrackerConfig | None = None) -> SequenceRun:
-    """Run one method over one recording with the §IV-C protocol (see the module docstring)."""
+                 tracker_config: TrackerConfig | None = None, inputs: InputChange = InputChange()) -> SequenceRun:
+    """Run one method over one recording with the §IV-C protocol (see the module docstring); ``inputs``: what-if
+    changes to the recording (:class:`InputChange`)."""
     if method not in METHODS:
         raise DaylightEvalError(f"unknown method {method!r}; choose from {', '.join(METHODS)}")
     files = sequence_files(seq_dir)
@@ -178,6 +210,9 @@ def run_sequence(seq_dir: Path, lmap: LightingMap, method: str, *, max_frames: i
                                                         enabled=progress, unit="frame"):
         if i >= n:
             break
+        if i % inputs.frame_step:
+            continue
+        depth_m = inputs.depth(depth_m)
         if tracker is None:
             tracker = RGBDTracker(camera, config=tracker_cfg)
             tracker.reset(T_gt)
@@ -364,10 +399,12 @@ def evaluate_daylight(sim_dir: Path, out_dir: Path, *, methods: Sequence[str] = 
                       sequences: Sequence[str] | None = None, maps_dir: Path | None = None,
                       max_frames: int | None = None, progress: bool = True, jobs: int = 1,
                       map_config: LightingMapConfig | None = None, tracker_config: TrackerConfig | None = None,
+                      inputs: InputChange = InputChange(),
                       on_run: Callable[[SequenceRun], None] | None = None) -> list[SequenceRun]:
     """Run ``methods`` over the recordings in ``sim_dir`` and write ``daylight_table.md``, ``daylight_frames.csv``,
     ``daylight_summary.json`` and PNG plots into ``out_dir``. ``tracker_config``: the tracker's parameters (the
-    node's defaults if None); each method sets only its ``mode``."""
+    node's defaults if None); each method sets only its ``mode``. ``inputs``: what-if changes to the recordings
+    (:class:`InputChange`; none by default)."""
     for m in methods:
         if m not in METHODS:
             raise DaylightEvalError(f"unknown method {m!r}; choose from {', '.join(METHODS)}")
@@ -396,12 +433,13 @@ def evaluate_daylight(sim_dir: Path, out_dir: Path, *, methods: Sequence[str] = 
     todo = []
     for seq in seq_dirs:
         for m in methods:
-            key = _run_key(seq, m, map_meta[scene_of(seq)], max_frames, tracker_config)
+            key = _run_key(seq, m, map_meta[scene_of(seq)], max_frames, tracker_config, inputs)
             stored = _load_run(out_dir, seq.name, m, key)
             if stored is not None:
                 runs.append(stored)
             else:
-                todo.append(((str(seq), m, str(maps_dir), max_frames, str(sim_dir), cfg_dict, tracker_dict), key))
+                todo.append(((str(seq), m, str(maps_dir), max_frames, str(sim_dir), cfg_dict, tracker_dict,
+                              asdict(inputs)), key))
     if runs:
         log.info("%d of %d runs reused from %s", len(runs), len(runs) + len(todo), out_dir / "runs")
 
@@ -442,7 +480,7 @@ CODE = ("daylight", "tracking", "eval/daylight.py", "bag", "geometry", "camera.p
 
 
 def _run_key(seq_dir: Path, method: str, map_meta: dict, max_frames: int | None,
-             tracker_config: TrackerConfig | None = None) -> str:
+             tracker_config: TrackerConfig | None = None, inputs: InputChange = InputChange()) -> str:
     """A hash of everything that decides one run's outcome (:mod:`lightfast.eval.cache`)."""
     _, reference, brightness = METHODS[method]
     parts = {
@@ -455,6 +493,8 @@ def _run_key(seq_dir: Path, method: str, map_meta: dict, max_frames: int | None,
         "relight": dataclasses.asdict(RelightConfig(reference=reference, method=brightness)),
         "max_frames": max_frames,
     }
+    if inputs != InputChange():  # the recording as it is keeps the keys of runs stored before this option existed
+        parts["inputs"] = asdict(inputs)
     return run_key(parts)
 
 
@@ -513,14 +553,15 @@ def _write_outputs(out_dir: Path, runs: Sequence[SequenceRun], methods: list[str
     _plots(out_dir, runs, sim_dir)
 
 
-def _run_job(job: tuple[str, str, str, int | None, str, dict | None, dict | None]) -> SequenceRun:
+def _run_job(job: tuple[str, str, str, int | None, str, dict | None, dict | None, dict]) -> SequenceRun:
     """Worker of ``--jobs``: one (recording, method) run in its own process."""
-    seq_dir, method, maps_dir, max_frames, sim_dir, map_config, tracker = job
+    seq_dir, method, maps_dir, max_frames, sim_dir, map_config, tracker, inputs = job
     seq = Path(seq_dir)
     scene = json.loads((seq / "sequence.json").read_text())["sequence"]["scene"]
     lmap = _cached_map(scene, Path(sim_dir), Path(maps_dir), map_config)
     return run_sequence(seq, lmap, method, max_frames=max_frames, progress=False, sun_B=_cached_sun(seq, lmap),
-                        tracker_config=None if tracker is None else config_from_mapping(TrackerConfig, tracker))
+                        tracker_config=None if tracker is None else config_from_mapping(TrackerConfig, tracker),
+                        inputs=InputChange(**inputs))
 
 
 _MAPS: dict[str, LightingMap] = {}

@@ -11,8 +11,8 @@ import pytest
 
 from lightfast import cli
 from lightfast.daylight.lighting_map import LightingMapConfig
-from lightfast.eval.daylight import evaluate_daylight, table_markdown
-from lightfast.eval.errors import EvalError
+from lightfast.eval.daylight import InputChange, evaluate_daylight, table_markdown
+from lightfast.eval.errors import DaylightEvalError, EvalError
 from lightfast.sim.daylight.irradiance_cache import CacheSettings
 from lightfast.sim.daylight.recordings import generate_daylight_set
 
@@ -80,6 +80,13 @@ def test_evaluation_writes_table_csv_json_and_plots(sim_dir: Path, tmp_path: Pat
                             tracker_config=TrackerConfig(f2m_iterations=(1, 1, 1)))
     assert ran == ["proposed"]
     assert not np.allclose(np.array(one[0].T_est), np.array(short[0].T_est), rtol=0, atol=1e-9)
+    # ... or with what-if inputs: every second frame of the first five
+    ran.clear()
+    half = evaluate_daylight(sim_dir, out, methods=["proposed"], maps_dir=tmp_path / "maps", max_frames=5,
+                             progress=False, map_config=MAP, on_run=lambda r: ran.append(r.method),
+                             inputs=InputChange(frame_step=2))
+    assert ran == ["proposed"]
+    assert [f.stamp_ns for f in half[0].frames] == [f.stamp_ns for f in short[0].frames][::2]
     # ... and so is a recording whose content changed under the same name (another seed or simulator version)
     other = tmp_path / "sim_other"
     shutil.copytree(sim_dir, other)
@@ -100,3 +107,18 @@ def test_bad_inputs_are_clear_errors(sim_dir: Path, tmp_path: Path) -> None:
         evaluate_daylight(tmp_path / "nothing", tmp_path)
     with pytest.raises(SystemExit):
         cli.main(["eval", "daylight", "--help"])
+
+
+def test_input_change_grows_depth_holes_and_checks_its_values() -> None:
+    depth = np.full((9, 9), 2.0, dtype=np.float32)
+    depth[4, 4] = 0.0
+    depth[0, 8] = np.nan
+    assert InputChange().depth(depth) is depth  # the recording as it is
+    grown = InputChange(depth_hole_grow_px=1).depth(depth)
+    assert grown.dtype == np.float32
+    assert np.all(grown[3:6, 3:6] == 0.0) and np.all(grown[0:2, 7:9] == 0.0)
+    assert np.count_nonzero(grown == 0.0) == 9 + 4 and np.all(np.isfinite(grown))
+    with pytest.raises(DaylightEvalError):
+        InputChange(frame_step=0)
+    with pytest.raises(DaylightEvalError):
+        InputChange(depth_hole_grow_px=-1)
