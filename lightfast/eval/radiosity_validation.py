@@ -96,7 +96,7 @@ def compare_with_radiance(mesh: ReflectanceMesh, *, points: int, seed: int, repe
 
     if lmap is None:
         lmap = prepare_lighting_map(mesh, site or FREIBURG, config, progress=progress)
-    pts, nrm = sample_surface_points(mesh, points, seed=seed)
+    pts, nrm = sample_surface_points(mesh, points, seed=seed, edge_clearance=at_vertices)
     if at_vertices:
         pts, nrm = snap_to_vertices(lmap, pts, nrm)
     crease_ids = np.zeros(0, dtype=np.int64)

@@ -384,10 +384,13 @@ def _point_triangle_dist(p: NDArray[np.float64], a: NDArray[np.float64], b: NDAr
 
 
 def _near_creases(mesh: ReflectanceMesh, points: NDArray[np.float64], face_idx: NDArray[np.int64],
-                  threshold: float, *, chunk: int = 64) -> NDArray[np.bool_]:
-    """True where a point lies within ``threshold`` of a triangle not in its own plane, or of a boundary edge."""
+                  threshold: float | NDArray[np.float64], *, chunk: int = 64) -> NDArray[np.bool_]:
+    """True where a point lies within ``threshold`` (one for all, or one per point) of a triangle not in its own
+    plane, or of a boundary edge."""
     v, f = mesh.vertices_m, mesh.faces
     tri = v[f]
+    limit = np.broadcast_to(np.asarray(threshold, dtype=np.float64), (len(points),))
+    threshold = float(limit.max()) if len(limit) else 0.0
     lo, hi = tri.min(axis=1) - threshold, tri.max(axis=1) + threshold
     fn = mesh.face_normals
     edges = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
@@ -407,13 +410,13 @@ def _near_creases(mesh: ReflectanceMesh, points: NDArray[np.float64], face_idx: 
         ip, jf = ip[~same_plane], jf[~same_plane]
         if len(ip):
             d = _point_triangle_dist(p[ip], tri[jf, 0], tri[jf, 1], tri[jf, 2])
-            np.logical_or.at(near, s + ip[d < threshold], True)
+            np.logical_or.at(near, s + ip[d < limit[s + ip]], True)
         if len(bnd):
             cand = np.all((p[:, None, :] >= elo[None]) & (p[:, None, :] <= ehi[None]), axis=2)
             ip, je = np.nonzero(cand)
             if len(ip):
                 d = _point_segment_dist(p[ip], ea[je], eb[je])
-                np.logical_or.at(near, s + ip[d < threshold], True)
+                np.logical_or.at(near, s + ip[d < limit[s + ip]], True)
     return near
 
 
@@ -444,6 +447,7 @@ def sample_surface_points(
     seed: int,
     exclude_near_edges_m: float = 0.05,
     near_edges_only_m: float = 0.0,
+    edge_clearance: bool = False,
     max_rounds: int = 50,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """``n`` points uniformly distributed by area on the mesh's visible surfaces, with their face normals.
@@ -465,6 +469,10 @@ def sample_surface_points(
             ``exclude_near_edges_m`` from it): the neighbourhood of junctions, where the visibility rays of issue 21
             went wrong. Exactly on a crease the irradiance is not defined (a reference renderer's query point lies in
             the other surface's plane and sees through it), hence the inner limit.
+        edge_clearance: also keep each point at least its triangle's longest edge from a crease, so that the
+            triangle's nearest vertex (where :func:`~lightfast.eval.radiosity_validation.snap_to_vertices` moves it)
+            is not on one either (coarse meshes: a user's room). No effect where triangles are no larger than
+            ``exclude_near_edges_m``.
         max_rounds: candidate batches to draw before giving up.
 
     Returns:
@@ -484,6 +492,7 @@ def sample_surface_points(
     caster = RayCaster(mesh.vertices_m, mesh.faces)
     tri = mesh.vertices_m[mesh.faces]
     fn = mesh.face_normals
+    longest_edge = np.max(np.linalg.norm(tri - np.roll(tri, 1, axis=1), axis=2), axis=1)
     got_p: list[NDArray[np.float64]] = []
     got_n: list[NDArray[np.float64]] = []
     have = 0
@@ -500,8 +509,9 @@ def sample_surface_points(
         ok = np.ones(m, dtype=bool)
         if near_edges_only_m > 0:
             ok &= _near_creases(mesh, p, fi, near_edges_only_m)
-        if exclude_near_edges_m > 0:
-            ok &= ~_near_creases(mesh, p, fi, exclude_near_edges_m)
+        clearance = np.maximum(exclude_near_edges_m, longest_edge[fi]) if edge_clearance else exclude_near_edges_m
+        if np.any(clearance > 0):
+            ok &= ~_near_creases(mesh, p, fi, clearance)
         idx = np.flatnonzero(ok)
         ok[idx[_hidden(caster, fn, p[ok], nrm[ok], rng)]] = False
         got_p.append(p[ok])
