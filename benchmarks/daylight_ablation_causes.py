@@ -11,7 +11,7 @@ nodes' code path) over the same recordings once per variant:
   further off);
 * ``depth holes +4 px``: every region without depth grown by 4 pixels (a depth camera that loses more than the
   directly sunlit pixels);
-* ``no f2f prior, 15 Hz``: both.
+* ``no f2f prior + 15 Hz``: both.
 
 Then measures the camera motion of the recordings against real hand-held frames (7-Scenes, ``../shared``): motion
 between frames and the constant-velocity prediction's error.
@@ -46,7 +46,7 @@ VARIANTS: dict[str, tuple[TrackerConfig, InputChange]] = {
     "no f2f prior": (TrackerConfig(pose_prior_weight=0.0), InputChange()),
     "15 Hz": (TrackerConfig(), InputChange(frame_step=2)),
     "depth holes +4 px": (TrackerConfig(), InputChange(depth_hole_grow_px=4)),
-    "no f2f prior, 15 Hz": (TrackerConfig(pose_prior_weight=0.0), InputChange(frame_step=2)),
+    "no f2f prior + 15 Hz": (TrackerConfig(pose_prior_weight=0.0), InputChange(frame_step=2)),
 }
 
 
