@@ -113,14 +113,16 @@ def executor(ros_context: Context) -> Iterator[SingleThreadedExecutor]:
 
 @pytest.fixture
 def make_node(ros_context: Context, executor: SingleThreadedExecutor) -> Iterator[Callable[..., Node]]:
-    """``make_node(name, **kwargs)``: a node on the private context, added to ``executor``."""
+    """``make_node(name, *, spun=True, **kwargs)``: a node on the private context, added to ``executor`` unless
+    ``spun`` is false (a node another thread creates and destroys entities on must not be in a waiting executor)."""
     from rclpy.node import Node
 
     nodes: list[Node] = []
 
-    def factory(name: str, **kwargs: object) -> Node:
+    def factory(name: str, *, spun: bool = True, **kwargs: object) -> Node:
         node = Node(name, context=ros_context, **kwargs)
-        executor.add_node(node)
+        if spun:
+            executor.add_node(node)
         nodes.append(node)
         return node
 

@@ -154,7 +154,11 @@ def play_bag(
     *,
     stop: threading.Event | None = None,
 ) -> PlayReport:
-    """Replay ``bag`` through publishers created on ``node``; ``stop`` ends the replay early."""
+    """Replay ``bag`` through publishers created on ``node``; ``stop`` ends the replay early.
+
+    The publishers are created and destroyed on the calling thread: ``node`` needs no spinning, and must not be in an
+    executor that another thread is spinning (rclpy raises ``InvalidHandle`` there when an entity is destroyed while
+    the executor waits on it)."""
     options = options or PlayOptions()
     stop = stop or threading.Event()
     reader = bag if isinstance(bag, BagReader) else open_bag(bag)

@@ -1,9 +1,10 @@
 """Helpers around a live rACR run for launch-free scripts (there is no ``ros2`` CLI here): ``lightfast racr wait``,
 used by ``scripts/racr_demo.sh``.
 
-:func:`wait_converged` follows ``/racr/status`` until ``racr_node`` reports ``converged``, or a stage it cannot
-leave by itself (``initialization_failed``, ``failed``), or the timeout passes, and gives up as soon as one of the
-watched processes has exited (both :class:`~lightfast.ros.errors.ToolError`). :func:`score_run` then scores where
+:func:`wait_converged` follows ``/racr/status`` until ``racr_node`` has ended its run (``converged``, or the same
+convergence its self-check did not confirm: ``ambiguous`` or ``failed``, :data:`FINISHED`), and raises
+:class:`~lightfast.ros.errors.ToolError` when the initialization failed, the timeout passes or one of the watched
+processes has exited. :func:`score_run` then scores where
 the camera really is — the evaluation reads the simulator's truth: the last ``/sim/ground_truth/camera_pose`` and
 the scene's ``truth.yaml`` —: the final AFD against the reference image (paper §5.2, success < 3 px), the camera
 pose error against the reference pose, and the errors of the estimated real scale s and hand–eye X.
@@ -28,21 +29,27 @@ from lightfast.sim.racr import RacrScene
 from lightfast.sim.racr_live import FinalPoseResult, evaluate_final_pose
 from lightfast.topics import PLATFORM_STATUS_TOPIC, RACR_STATUS_TOPIC, SIM_CAMERA_POSE_TOPIC
 
-__all__ = ["NODE_NAME", "TERMINAL_FAILURES", "RacrRun", "pose7_to_matrix", "score_run", "wait_converged"]
+__all__ = ["FINISHED", "NODE_NAME", "TERMINAL_FAILURES", "RacrRun", "pose7_to_matrix", "score_run", "wait_converged"]
 
 NODE_NAME = "racr_node"
-#: Stages racr_node does not leave by itself.
-TERMINAL_FAILURES = ("initialization_failed", "failed", "ambiguous")
+#: Stages in which racr_node's run has ended: g <= eta, and the self-check's verdict on it (verified: converged).
+FINISHED = ("converged", "ambiguous", "failed")
+#: Stages racr_node does not leave by itself, without a pose to score.
+TERMINAL_FAILURES = ("initialization_failed",)
 
 
 @dataclass(frozen=True)
 class RacrRun:
-    """What :func:`wait_converged` saw of a converged run."""
+    """What :func:`wait_converged` saw of a finished run (``stage``: one of :data:`FINISHED`)."""
 
     status: dict[str, str]  # racr_node's last status values (and "message")
     platform: dict[str, str]  # the platform simulator's last status values
     T_world_cam: np.ndarray  # the true camera pose after the last motion
     wall_s: float  # wall time from the start of the wait to convergence
+
+    @property
+    def stage(self) -> str:
+        return self.status.get("stage", "")
 
     @property
     def scale_m_per_vse(self) -> float | None:
@@ -61,9 +68,9 @@ def pose7_to_matrix(text: str) -> np.ndarray | None:
 
 
 def wait_converged(node: Any, executor: Any, *, timeout_s: float, pids: Sequence[int] = ()) -> RacrRun:
-    """Spin until racr_node has converged and the platform has come to rest; raises :class:`ToolError` when
-    racr_node stops in a failed stage, a process of ``pids`` exits, ``timeout_s`` passes or no true camera pose
-    arrived. Ctrl-C (rclpy's signal handler) raises KeyboardInterrupt."""
+    """Spin until racr_node's run has ended (a stage of :data:`FINISHED`) and the platform has come to rest; raises
+    :class:`ToolError` when the initialization failed, a process of ``pids`` exits, ``timeout_s`` passes or no true
+    camera pose arrived. Ctrl-C (rclpy's signal handler) raises KeyboardInterrupt."""
     from diagnostic_msgs.msg import DiagnosticArray
     from geometry_msgs.msg import PoseStamped
     from rclpy.executors import ExternalShutdownException
@@ -101,14 +108,14 @@ def wait_converged(node: Any, executor: Any, *, timeout_s: float, pids: Sequence
         stage = seen["racr"].get("stage")
         if stage in TERMINAL_FAILURES:
             raise ToolError(f"{NODE_NAME} stopped in stage {stage}: {seen['racr'].get('message')}")
-        if stage == "converged" and end is None:
+        if stage in FINISHED and end is None:
             end = time.monotonic()
         # after convergence, let the platform's at-rest state and the truth of its last stop arrive
         if end is not None and time.monotonic() - end > 0.5 and seen["platform"].get("moving") == "false":
             break
     else:
         state = seen["racr"] or f"no status on {RACR_STATUS_TOPIC} (is {NODE_NAME} running?)"
-        raise ToolError(f"{NODE_NAME} did not converge within {timeout_s:g} s; last status: {state}")
+        raise ToolError(f"{NODE_NAME} did not finish within {timeout_s:g} s; last status: {state}")
     if seen["truth"] is None:
         raise ToolError(f"no {SIM_CAMERA_POSE_TOPIC} received: is the platform simulator running?")
     assert end is not None

@@ -40,7 +40,7 @@ def play_in_thread(bag: Path, node, options: PlayOptions) -> tuple[threading.Thr
 def test_play_into_recorder_is_lossless_and_identical(tmp_path, make_node, executor) -> None:
     src = make_bag(tmp_path / "src")
     recorder = BagRecorder(make_node("recorder"), BagWriter(tmp_path / "rec"), topics=["/text"])
-    player = make_node("player")
+    player = make_node("player", spun=False)
     thread, out = play_in_thread(src, player, PlayOptions(rate=0.0, topics=("/text",), wait_for_subscribers_s=5.0))
     assert spin_until(executor, lambda: recorder.report.message_count == 50, timeout_s=20.0)
     thread.join(timeout=10)
@@ -70,7 +70,7 @@ def test_rate_start_offset_and_clock(tmp_path, make_node, executor) -> None:
                                  QoSProfile(depth=100, reliability=ReliabilityPolicy.BEST_EFFORT))
     options = PlayOptions(rate=2.0, clock_hz=100.0, start_offset_s=0.2, wait_for_subscribers_s=5.0)
     t0 = time.monotonic()
-    thread, out = play_in_thread(src, make_node("player"), options)
+    thread, out = play_in_thread(src, make_node("player", spun=False), options)
     assert spin_until(executor, lambda: len(texts) == 20 and not thread.is_alive(), timeout_s=20.0)
     wall = time.monotonic() - t0
     report = out["report"]
@@ -94,7 +94,8 @@ def test_preroll_runs_the_clock_before_the_first_message(tmp_path, make_node, ex
     sub_node.create_subscription(Clock, "/clock", lambda m: clocks.append(stamp_to_ns(m.clock)), 100)
     executor.add_node(sub_node)
     t0 = time.monotonic()
-    thread, out = play_in_thread(src, make_node("player"), PlayOptions(rate=2.0, clock_hz=100.0, preroll_s=0.6))
+    player = make_node("player", spun=False)
+    thread, out = play_in_thread(src, player, PlayOptions(rate=2.0, clock_hz=100.0, preroll_s=0.6))
     assert spin_until(executor, lambda: not thread.is_alive(), timeout_s=20.0)
     wall = time.monotonic() - t0
     report = out["report"]
@@ -114,7 +115,7 @@ def test_loop_until_stopped(tmp_path, make_node, executor) -> None:
         RclString, "/text", lambda m: counter.__setitem__("n", counter["n"] + 1), QoSProfile(depth=100))
     out: dict = {}
     options = PlayOptions(rate=1.0, loop=True, topics=("/text",), wait_for_subscribers_s=5.0)
-    thread = threading.Thread(target=lambda: out.setdefault("r", play_bag(src, make_node("player"), options,
+    thread = threading.Thread(target=lambda: out.setdefault("r", play_bag(src, make_node("player", spun=False), options,
                                                                          stop=stop)), daemon=True)
     thread.start()
     assert spin_until(executor, lambda: counter["n"] >= 12, timeout_s=20.0)
@@ -127,7 +128,7 @@ def test_loop_until_stopped(tmp_path, make_node, executor) -> None:
 def test_recorder_records_all_topics_and_drains(tmp_path, make_node, executor) -> None:
     src = make_bag(tmp_path / "src", n=30)
     recorder = BagRecorder(make_node("recorder"), BagWriter(tmp_path / "rec", storage="sqlite3"))
-    thread, _ = play_in_thread(src, make_node("player"), PlayOptions(rate=0.0, wait_for_subscribers_s=5.0))
+    thread, _ = play_in_thread(src, make_node("player", spun=False), PlayOptions(rate=0.0, wait_for_subscribers_s=5.0))
     assert spin_until(executor, lambda: len(recorder.subscribed) == 2, timeout_s=10.0)
     thread.join(timeout=20)
     drain(lambda t: executor.spin_once(timeout_sec=t), lambda: recorder.report.message_count)
@@ -162,7 +163,8 @@ def test_player_skips_a_corrupt_chunk_and_reports_it(tmp_path, make_node, execut
     qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
     listener.create_subscription(RclHeader, "/tick", lambda m: ticks.append(m.frame_id), qos)
     listener.create_subscription(RclString, "/blob", lambda m: blobs.append(int(m.data.split()[1])), qos)
-    thread, out = play_in_thread(src, make_node("player"), PlayOptions(rate=0.0, wait_for_subscribers_s=5.0))
+    player = make_node("player", spun=False)
+    thread, out = play_in_thread(src, player, PlayOptions(rate=0.0, wait_for_subscribers_s=5.0))
     expected_ticks = [f"tick {i}" for i in range(30) if T0 + i * 10_000_000 + 1 not in lost_ticks]
     expected_blobs = [i for i in range(30) if ("/blob", T0 + i * 10_000_000) not in lost]
     assert spin_until(executor, lambda: not thread.is_alive() and len(ticks) == len(expected_ticks)
@@ -184,7 +186,7 @@ def test_recorder_writes_zstd_chunks(tmp_path, make_node, executor) -> None:
     src = write_chunked_bag(tmp_path / "src", n=20)
     recorder = BagRecorder(make_node("recorder"), BagWriter(tmp_path / "rec", compression="zstd"),
                            topics=["/blob", "/tick"])
-    thread, _ = play_in_thread(src, make_node("player"), PlayOptions(rate=0.0, wait_for_subscribers_s=5.0))
+    thread, _ = play_in_thread(src, make_node("player", spun=False), PlayOptions(rate=0.0, wait_for_subscribers_s=5.0))
     assert spin_until(executor, lambda: recorder.report.message_count == 40, timeout_s=30.0)
     thread.join(timeout=10)
     report = recorder.close()

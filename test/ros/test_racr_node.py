@@ -149,7 +149,13 @@ def test_racr_platform_and_vse_nodes_relocalize_the_camera(scene_dir: Path, star
     """racr_node issues the four initialization motions, recovers X and s, then aligns and adjusts until g ≤ η; the
     camera really is at the reference: AFD < 3 px (the paper's success) by the simulator's truth. η = 3e-3: at
     160×120 px the estimate's own noise (~1e-3 in g) keeps the paper's 1e-4 out of reach. Measured: 3 adjustments,
-    ~0.8 px, ~6 mm."""
+    ~0.8 px, ~6 mm.
+
+    The self-check (lightfast/racr/verification.py) may answer ``ambiguous`` here: under the varied lighting at
+    160×120 px the reference image gives 4-11 SIFT matches, around its ``min_agreeing`` of 6, and the restarts of
+    the geometric check then decide (seen once in CI: a restart 2.3 cm away as good). ``ambiguous`` makes no claim
+    the truth can contradict; ``failed`` does (the pose is wrong), and then the truth checks below must fail. How
+    often the check is right is measured by the evaluation (`lightfast eval racr`), not here."""
     probe = Probe(make_node, executor)
     aligned: list[PointCloud2] = []
     camera_poses: list[PoseStamped] = []
@@ -161,9 +167,9 @@ def test_racr_platform_and_vse_nodes_relocalize_the_camera(scene_dir: Path, star
                  **{"adjustment.eta": 3e-3})
     # racr_node never reads the simulator's truth
     assert SIM_CAMERA_POSE_TOPIC not in {s.topic_name for s in racr.subscriptions}
-    level, message, values = probe.wait_status(lambda lv, m, v: v.get("stage") in ("converged", "failed",
+    level, message, values = probe.wait_status(lambda lv, m, v: v.get("stage") in ("converged", "ambiguous", "failed",
                                                                                    "initialization_failed"), 90.0)
-    assert values["stage"] == "converged" and level == Level.OK, (message, values)
+    assert (values["stage"], level) in (("converged", Level.OK), ("ambiguous", Level.WARN)), (message, values)
     assert racr.session is not None and racr.session.scheme is not None and racr.session.scheme.running
     # the initialization motions first, exactly as planned, then adjustments; nothing after convergence
     init = initialization_motions(racr.config.session)
