@@ -54,7 +54,7 @@ from lightfast.racr.verification import (
     ReferenceView,
     Verification,
     VerificationConfig,
-    look_alike_distance,
+    restart_fits,
     verify,
 )
 
@@ -436,16 +436,21 @@ class RacrSession:
         result = verify(self._view, kfs)
         if result.verdict != "ambiguous":
             return result
-        # the image cannot tell (a strong lighting change): is the geometric fit unique around the estimate?
+        # the image cannot tell (a strong lighting change): is the geometric fit the best around the estimate?
         T_ref_cam = camera_pose_in_reference(_scaled_pose(obs.T_vse_cam, s), st.T_ref_cur, st.sigma)
         try:
-            d, ran = look_alike_distance(obs.points * s, self._reference, st.T_ref_cur, st.sigma, T_ref_cam,
-                                         self.fast_config, self.verification_config)
+            restarts = restart_fits(obs.points * s, self._reference, st.T_ref_cur, st.sigma, T_ref_cam, self._view,
+                                    self.fast_config)
         except RacrError as exc:
             logger.info("restarts around the estimate failed: %s", exc)
             return result
-        verdict = "ambiguous" if np.isfinite(d) or ran == 0 else "verified"
-        return replace(result, verdict=verdict, look_alike_m=d, restarts=ran)
+        if np.isfinite(restarts.better_ratio):
+            verdict = "failed"
+        elif np.isfinite(restarts.look_alike_px) or restarts.ran == 0:
+            verdict = "ambiguous"
+        else:
+            verdict = "verified"
+        return replace(result, verdict=verdict, restarts=restarts)
 
     def _hand_eye_result(self, result: HandEyeResult) -> HandEyeResult:
         """The initialization's result as the scheme gets it: unchanged here; a study of the method's sensitivity

@@ -13,16 +13,20 @@ Verdict (:class:`Verification`): ``verified`` with at least ``min_agreeing`` agr
 matches instead support another camera pose — a PnP RANSAC on them (cv2.solvePnPRansac) finds at least
 ``min_other_pose`` inliers at a pose that moves the reference keypoints by more than ``agree_px`` on average from
 where the estimate puts them. When the image cannot tell (too few matches under a lighting change), the geometry
-is asked instead (:func:`look_alike_distance`): the fast alignment is restarted from the estimate shifted by a few
-cm across the view; a restart that settles elsewhere with a comparable fitness is a look-alike (a repetitive relief:
-``ambiguous``), none means the fit is unique around the estimate (``verified`` by the geometry). Inputs:
-the reference cloud (metres, reference frame), its camera and pose, the reference image; keyframes as (image in
+is asked instead (:func:`restart_fits`): the fast alignment is restarted from the estimate shifted across the view
+by 5–40 % of the scene's depth (the view moves by roughly 4–35 % of its width: a wrong convergence can lie that far,
+seen at 40 % on development scenes). A restart whose fit moves the current points by more than ``agree_px`` in the
+reference image is another fit: a clearly better one (fitness above the estimate's by the factor
+1 / ``basin_fitness_ratio``) means the estimate is a local minimum (``failed``), a comparable one is a look-alike (a
+repetitive relief: ``ambiguous``), none means the fit is unique around the estimate (``verified`` by the geometry).
+
+Inputs: the reference cloud (metres, reference frame), its camera and pose, the reference image; keyframes as (image in
 [0, 1], ``T_ref_cam`` in metres, camera).
 """
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
@@ -31,12 +35,12 @@ from scipy import ndimage
 
 from lightfast.camera import PinholeCamera
 from lightfast.config import Config, param
-from lightfast.geometry import inverse
+from lightfast.geometry import inverse, transform_points
 from lightfast.racr.acr_baseline import AcrConfig, sift_matches
 from lightfast.racr.errors import AlignmentError
 from lightfast.racr.fast_alignment import FastAlignmentConfig, ReferenceCloud, fast_align
 
-__all__ = ["VERDICTS", "ReferenceView", "Verification", "VerificationConfig", "look_alike_distance", "verify"]
+__all__ = ["VERDICTS", "ReferenceView", "Restarts", "Verification", "VerificationConfig", "restart_fits", "verify"]
 
 Array = NDArray[np.float64]
 VERDICTS = ("verified", "failed", "ambiguous")
@@ -58,39 +62,56 @@ class VerificationConfig(Config):
                                 "(more than min_agreeing: RANSAC fits a few wrong matches by chance).", min=6)
     depth_radius_px: int = param(2, description="A reference keypoint takes the depth of the nearest reference point "
                                  "projected within this many pixels (a semi-dense cloud).", min=0, max=10)
-    basin_shifts_m: tuple[float, ...] = param(
-        (0.03, 0.06), description="When the image cannot tell (a strong lighting change): the fast alignment is "
-        "started again from the estimate shifted by these distances along the camera's x and y axes, m.")
-    basin_separation_m: float = param(0.01, description="A restart that settles this far from the estimate is "
-                                      "another fit, m.", min=0.0)
-    basin_fitness_ratio: float = param(0.9, description="... and a look-alike when its fitness is at least this "
-                                       "share of the estimate's (then the convergence is ambiguous).", min=0.0,
-                                       max=2.0)
+    basin_shifts_depth: tuple[float, ...] = param(
+        (0.05, 0.1, 0.2, 0.4), description="When the image cannot tell (a strong lighting change): the fast "
+        "alignment is started again from the estimate shifted along the camera's x and y axes by these fractions of "
+        "the current cloud's median depth (0.4: the view moves by about a third of its width).")
+    basin_fitness_ratio: float = param(0.9, description="A restart that settles elsewhere (its fit moves the points "
+                                       "by more than agree_px in the reference image) is a look-alike when its "
+                                       "fitness is at least this share of the estimate's (ambiguous), and a better "
+                                       "fit when the estimate's is at most this share of its (failed).", min=0.01,
+                                       max=1.0)
+
+
+@dataclass(frozen=True)
+class Restarts:
+    """What :func:`restart_fits` found: how many restarts ran, and for the nearest look-alike (comparable fitness)
+    and the best clearly better fit elsewhere their mean displacement of the points in the reference image (px) and
+    fitness relative to the estimate's (NaN: none)."""
+
+    ran: int
+    look_alike_px: float = float("nan")
+    look_alike_ratio: float = float("nan")
+    better_px: float = float("nan")
+    better_ratio: float = float("nan")
 
 
 @dataclass(frozen=True)
 class Verification:
-    """The verdict, the matches it rests on and, for ``failed``, the mean displacement (px) between where the
-    estimate and where the images put the reference features; ``look_alike_m``: the distance to the nearest other
-    fit of comparable fitness the restarts found (NaN: none; only when the image could not tell)."""
+    """The verdict, the matches it rests on and, for a ``failed`` image check, the mean displacement (px) between
+    where the estimate and where the images put the reference features; ``restarts``: the geometric check, when the
+    image could not tell (None otherwise)."""
 
     verdict: str
     matches: int
     agreeing: int
     other_pose_inliers: int = 0
     disagreement_px: float = float("nan")
-    look_alike_m: float = float("nan")
-    restarts: int = 0
+    restarts: Restarts | None = None
 
     def describe(self) -> str:
-        if self.verdict == "verified" and self.restarts:
-            return (f"verified by the geometry: {self.restarts} restarts settle back (the reference image could not "
-                    f"tell: {self.agreeing} of {self.matches} matches agree)")
+        r = self.restarts
+        image = f"the reference image could not tell: {self.agreeing} of {self.matches} matches agree"
+        if r is not None and self.verdict == "verified":
+            return f"verified by the geometry: {r.ran} restarts find no other fit as good ({image})"
         if self.verdict == "verified":
             return f"verified by {self.agreeing} of {self.matches} reference-image matches"
-        if self.verdict == "ambiguous" and np.isfinite(self.look_alike_m):
-            return (f"a look-alike fit {100 * self.look_alike_m:.1f} cm away is as good (the reference "
-                    f"image could not tell: {self.agreeing} of {self.matches} matches agree)")
+        if r is not None and self.verdict == "failed":
+            return (f"a restart found a better fit {r.better_px:.1f} px away (fitness x{r.better_ratio:.2f}): "
+                    f"converged to a local minimum ({image})")
+        if r is not None and np.isfinite(r.look_alike_px):
+            return (f"a look-alike fit {r.look_alike_px:.1f} px away is as good (fitness x{r.look_alike_ratio:.2f}; "
+                    f"{image})")
         if self.verdict == "failed":
             return (f"the reference image disagrees: {self.other_pose_inliers} matches put the camera elsewhere "
                     f"(features {self.disagreement_px:.1f} px from where the estimate puts them; {self.agreeing} "
@@ -165,28 +186,44 @@ def verify(view: ReferenceView, keyframes: Sequence[tuple[ArrayLike, ArrayLike, 
     return Verification("ambiguous", matches, agreeing, best_other, disagreement)
 
 
-def look_alike_distance(points_cur: ArrayLike, reference: ReferenceCloud, T_ref_cur: Array, sigma: float,
-                        T_ref_cam: Array, fast_config: FastAlignmentConfig,
-                        config: VerificationConfig) -> tuple[float, int]:
-    """Restart the fast alignment from the estimate shifted along the camera's x and y axes (``basin_shifts_m``):
-    the distance (m) to the nearest restart that settles elsewhere (``basin_separation_m``) with at least
-    ``basin_fitness_ratio`` of the estimate's own fitness (NaN: none), and the number of restarts that ran."""
-    here = fast_align(points_cur, reference, T_ref_cur_init=T_ref_cur, sigma_init=sigma, config=fast_config)
-    nearest, ran = float("nan"), 0
-    axes = (T_ref_cam[:3, 0], T_ref_cam[:3, 1])
-    for d in config.basin_shifts_m:
-        for axis in axes:
+def restart_fits(points_cur: ArrayLike, reference: ReferenceCloud, T_ref_cur: Array, sigma: float,
+                 T_ref_cam: Array, view: ReferenceView, fast_config: FastAlignmentConfig) -> Restarts:
+    """Restart the fast alignment from the estimate (``T_ref_cur``, ``sigma``) shifted along the current camera's x
+    and y axes (``T_ref_cam``) by ``basin_shifts_depth`` times the current cloud's median depth, and compare each
+    fit with the estimate's own (the alignment restarted at the estimate): its displacement of the current points in
+    the reference image (``view``'s camera) and its fitness (module docstring). Raises
+    :class:`~lightfast.racr.errors.AlignmentError` when the alignment fails at the estimate itself."""
+    config = view.config
+    pts = np.asarray(points_cur, dtype=np.float64)
+    here = fast_align(pts, reference, T_ref_cur_init=T_ref_cur, sigma_init=sigma, config=fast_config)
+    sample = pts[np.random.default_rng(0).choice(len(pts), min(len(pts), 2000), replace=False)]
+    T_camref_ref = inverse(view.T_ref_camref)
+    uv_here, ok_here = view.camera.project(transform_points(T_camref_ref, here.transform(sample)))
+    z_cam = transform_points(inverse(T_ref_cam), here.transform(sample))[:, 2]
+    depth = float(np.median(z_cam[z_cam > 0])) if np.any(z_cam > 0) else 0.0
+    found = Restarts(0)
+    for d in config.basin_shifts_depth:
+        for axis in (T_ref_cam[:3, 0], T_ref_cam[:3, 1]):
             for sign in (1.0, -1.0):
                 start = np.array(T_ref_cur, dtype=np.float64)
-                start[:3, 3] += sign * d * axis
+                start[:3, 3] += sign * d * depth * axis
                 try:
-                    r = fast_align(points_cur, reference, T_ref_cur_init=start, sigma_init=sigma, config=fast_config)
+                    r = fast_align(pts, reference, T_ref_cur_init=start, sigma_init=sigma, config=fast_config)
                 except AlignmentError:
                     continue
-                ran += 1
-                dist = float(np.linalg.norm(r.T_ref_cur[:3, 3] - here.T_ref_cur[:3, 3]))
-                if (r.converged and dist > config.basin_separation_m
-                        and r.fitness >= config.basin_fitness_ratio * here.fitness
-                        and (np.isnan(nearest) or dist < nearest)):
-                    nearest = dist
-    return nearest, ran
+                found = replace(found, ran=found.ran + 1)
+                if not r.converged or here.fitness <= 0.0:
+                    continue
+                uv, ok = view.camera.project(transform_points(T_camref_ref, r.transform(sample)))
+                both = ok & ok_here
+                px = float(np.mean(np.linalg.norm(uv[both] - uv_here[both], axis=1))) if both.any() else np.inf
+                ratio = r.fitness / here.fitness
+                if px <= config.agree_px:
+                    continue  # the same fit
+                if ratio * config.basin_fitness_ratio >= 1.0:
+                    if np.isnan(found.better_ratio) or ratio > found.better_ratio:
+                        found = replace(found, better_px=px, better_ratio=ratio)
+                elif ratio >= config.basin_fitness_ratio:
+                    if np.isnan(found.look_alike_px) or px < found.look_alike_px:
+                        found = replace(found, look_alike_px=px, look_alike_ratio=ratio)
+    return found

@@ -30,7 +30,7 @@ import logging
 import math
 import time
 from collections.abc import Callable
-from dataclasses import replace
+from dataclasses import asdict, replace
 from typing import Any
 
 import numpy as np
@@ -232,6 +232,12 @@ def _run_racr(scene: Any, devices: _Devices, node: RacrNodeConfig, config: RacrE
         })
     if st.init_error:
         record.details["init_error"] = st.init_error
+    v = racr.verification
+    if v is not None:  # the self-check's evidence, to study its verdicts against the truth
+        record.details["verification"] = {
+            "verdict": v.verdict, "matches": v.matches, "agreeing": v.agreeing,
+            "other_pose_inliers": v.other_pose_inliers, "disagreement_px": v.disagreement_px,
+            "restarts": None if v.restarts is None else asdict(v.restarts)}
 
 
 def _run_acr(scene: Any, session: _Devices, config: RacrEvalConfig, record: RunRecord) -> None:

@@ -63,21 +63,29 @@ def _relief(kind: str, rng: np.random.Generator, n: int = 6000) -> np.ndarray:
 
 
 def test_restarts_find_the_look_alike_of_a_repetitive_relief() -> None:
-    """When the image cannot tell, the geometry is asked: on a corrugated wall the fast alignment restarted a few
-    cm away settles one period over with the same fitness (ambiguous); on a bumpy wall it comes back (unique)."""
+    """When the image cannot tell, the geometry is asked: on a corrugated wall the fast alignment restarted across
+    the view settles one period over (4 cm = 20 px at 1 m) with about the same fitness (ambiguous); on a bumpy wall
+    every restart comes back or finds nothing as good (unique); started one period off on the corrugation, a
+    restart finds the better, fully overlapping fit (a local minimum: failed)."""
+    from lightfast.camera import PinholeCamera
     from lightfast.racr.fast_alignment import FastAlignmentConfig, ReferenceCloud
-    from lightfast.racr.verification import look_alike_distance
+    from lightfast.racr.verification import restart_fits
 
     rng = np.random.default_rng(7)
-    cfg = VerificationConfig()
+    camera = PinholeCamera(640, 480, 500.0, 500.0, 319.5, 239.5)
     fast = FastAlignmentConfig(estimate_scale=False)
-    for kind, repetitive in (("corrugated", True), ("bumpy", False)):
+    for kind in ("corrugated", "bumpy"):
         ref_pts = _relief(kind, rng)
+        view = ReferenceView(ref_pts, np.eye(4), np.zeros((480, 640)), camera)
         cur = ref_pts[rng.choice(len(ref_pts), 3000, replace=False)] + rng.normal(0, 0.0005, (3000, 3))
-        d, ran = look_alike_distance(cur, ReferenceCloud.from_config(ref_pts, fast), np.eye(4), 1.0, np.eye(4), fast,
-                                     cfg)
-        assert ran > 0
-        if repetitive:
-            assert np.isfinite(d) and abs(d - 0.04) < 0.01, d
+        r = restart_fits(cur, ReferenceCloud.from_config(ref_pts, fast), np.eye(4), 1.0, np.eye(4), view, fast)
+        assert r.ran > 0, r
+        if kind == "corrugated":
+            assert abs(r.look_alike_px - 20.0) < 5.0 and r.look_alike_ratio >= 0.9 and np.isnan(r.better_ratio), r
+            # the current view is the wall's last 10 cm, held one period further out: 4 cm of it off the wall
+            part = cur[cur[:, 0] > 0.1]
+            off = make_transform(np.eye(3), [0.04, 0.0, 0.0])
+            r = restart_fits(part, ReferenceCloud.from_config(ref_pts, fast), off, 1.0, np.eye(4), view, fast)
+            assert r.better_ratio > 1.0 / 0.9 and r.better_px > 15.0, r
         else:
-            assert np.isnan(d), d
+            assert np.isnan(r.look_alike_px) and np.isnan(r.better_px), r
