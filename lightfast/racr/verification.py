@@ -12,12 +12,19 @@ lies within ``agree_px`` of that projection.
 Verdict (:class:`Verification`): ``verified`` with at least ``min_agreeing`` agreeing matches; ``failed`` when the
 matches instead support another camera pose — a PnP RANSAC on them (cv2.solvePnPRansac) finds at least
 ``min_other_pose`` inliers at a pose that moves the reference keypoints by more than ``agree_px`` on average from
-where the estimate puts them. When the image cannot tell (too few matches under a lighting change), the geometry
-is asked instead (:func:`restart_fits`): the fast alignment is restarted from the estimate shifted across the view
-by 5–40 % of the scene's depth (the view moves by roughly 4–35 % of its width: a wrong convergence can lie that far,
-seen at 40 % on development scenes). A restart whose fit moves the current points by more than ``agree_px`` in the
-reference image is another fit: a clearly better one (fitness above the estimate's by the factor
-1 / ``basin_fitness_ratio``) means the estimate is a local minimum (``failed``), a comparable one is a look-alike (a
+where the estimate puts them. Under a strong lighting change SIFT matches are few and mostly wrong; the image is then
+asked as a whole (:func:`image_shift`): each keyframe is warped into the reference view by the estimate (the
+homography of the plane at the reference's median depth, facing the reference camera) and its gradient magnitude
+(which keeps edges of the relief whichever side the light comes from) is phase-correlated with the reference's
+(cv2.phaseCorrelate). Where the estimate is right the shift is near zero; when at least ``shift_min_keyframes``
+keyframes agree within ``agree_px`` on a shift of more than ``agree_px``, the estimate is wrong by that shift
+(``failed``; chance peaks scatter over the whole image, two landing within a few px of each other are not chance). A
+shift near zero does not verify (it cannot tell a few px, the success criterion's scale). When neither cue can tell,
+the geometry is asked instead (:func:`restart_fits`): the fast alignment is restarted from the estimate shifted across
+the view by 5–40 % of the scene's depth (the view moves by roughly 4–35 % of its width: a wrong convergence can lie
+that far, seen at 40 % on development scenes). A restart whose fit moves the current points by more than ``agree_px``
+in the reference image is another fit: a clearly better one (fitness above the estimate's by the factor 1 /
+``basin_fitness_ratio``) means the estimate is a local minimum (``failed``), a comparable one is a look-alike (a
 repetitive relief: ``ambiguous``), none means the fit is unique around the estimate (``verified`` by the geometry).
 
 Inputs: the reference cloud (metres, reference frame), its camera and pose, the reference image; keyframes as (image in
@@ -40,7 +47,8 @@ from lightfast.racr.acr_baseline import AcrConfig, sift_matches
 from lightfast.racr.errors import AlignmentError
 from lightfast.racr.fast_alignment import FastAlignmentConfig, ReferenceCloud, fast_align
 
-__all__ = ["VERDICTS", "ReferenceView", "Restarts", "Verification", "VerificationConfig", "restart_fits", "verify"]
+__all__ = ["VERDICTS", "ImageShift", "ReferenceView", "Restarts", "Verification", "VerificationConfig", "image_shift",
+           "restart_fits", "verify"]
 
 Array = NDArray[np.float64]
 VERDICTS = ("verified", "failed", "ambiguous")
@@ -62,6 +70,9 @@ class VerificationConfig(Config):
                                 "(more than min_agreeing: RANSAC fits a few wrong matches by chance).", min=6)
     depth_radius_px: int = param(2, description="A reference keypoint takes the depth of the nearest reference point "
                                  "projected within this many pixels (a semi-dense cloud).", min=0, max=10)
+    shift_min_keyframes: int = param(2, description="Keyframes whose image shifts against the reference (phase "
+                                     "correlation after warping by the estimate) agree within agree_px on more than "
+                                     "agree_px: the convergence is failed.", min=2)
     basin_shifts_depth: tuple[float, ...] = param(
         (0.05, 0.1, 0.2, 0.4), description="When the image cannot tell (a strong lighting change): the fast "
         "alignment is started again from the estimate shifted along the camera's x and y axes by these fractions of "
@@ -87,6 +98,20 @@ class Restarts:
 
 
 @dataclass(frozen=True)
+class ImageShift:
+    """What :func:`image_shift` measured: the median shift (px, x and y) of the keyframes' images against the
+    reference after warping by the estimate, how many keyframes agree with it within ``agree_px``, of how many."""
+
+    shift_px: tuple[float, float]
+    agreeing: int
+    keyframes: int
+
+    @property
+    def norm_px(self) -> float:
+        return float(np.hypot(*self.shift_px))
+
+
+@dataclass(frozen=True)
 class Verification:
     """The verdict, the matches it rests on and, for a ``failed`` image check, the mean displacement (px) between
     where the estimate and where the images put the reference features; ``restarts``: the geometric check, when the
@@ -97,6 +122,7 @@ class Verification:
     agreeing: int
     other_pose_inliers: int = 0
     disagreement_px: float = float("nan")
+    shift: ImageShift | None = None
     restarts: Restarts | None = None
 
     def describe(self) -> str:
@@ -112,6 +138,10 @@ class Verification:
         if r is not None and np.isfinite(r.look_alike_px):
             return (f"a look-alike fit {r.look_alike_px:.1f} px away is as good (fitness x{r.look_alike_ratio:.2f}; "
                     f"{image})")
+        sh = self.shift
+        if self.verdict == "failed" and sh is not None and sh.norm_px > 0 and self.other_pose_inliers == 0:
+            return (f"the reference image is shifted {sh.norm_px:.1f} px from where the estimate puts it "
+                    f"({sh.agreeing} of {sh.keyframes} keyframes agree; {image})")
         if self.verdict == "failed":
             return (f"the reference image disagrees: {self.other_pose_inliers} matches put the camera elsewhere "
                     f"(features {self.disagreement_px:.1f} px from where the estimate puts them; {self.agreeing} "
@@ -183,7 +213,47 @@ def verify(view: ReferenceView, keyframes: Sequence[tuple[ArrayLike, ArrayLike, 
         return Verification("verified", matches, agreeing, best_other, disagreement)
     if best_other >= cfg.min_other_pose and disagreement > cfg.agree_px:
         return Verification("failed", matches, agreeing, best_other, disagreement)
-    return Verification("ambiguous", matches, agreeing, best_other, disagreement)
+    shift = image_shift(view, keyframes)
+    if shift.agreeing >= cfg.shift_min_keyframes and shift.norm_px > cfg.agree_px:
+        return Verification("failed", matches, agreeing, 0, shift=shift)
+    return Verification("ambiguous", matches, agreeing, best_other, disagreement, shift=shift)
+
+
+def _gradient_magnitude(image: ArrayLike) -> NDArray[np.float32]:
+    img = np.asarray(image, dtype=np.float32)
+    g = cv2.GaussianBlur(img.mean(axis=2) if img.ndim == 3 else img, (0, 0), 1.0)
+    m = np.hypot(cv2.Sobel(g, cv2.CV_32F, 1, 0), cv2.Sobel(g, cv2.CV_32F, 0, 1))
+    return (m / max(float(m.mean()), 1e-12)).astype(np.float32)
+
+
+def image_shift(view: ReferenceView, keyframes: Sequence[tuple[ArrayLike, ArrayLike, PinholeCamera]]) -> ImageShift:
+    """The shift of the keyframes' images against the reference image where the estimate (each keyframe's
+    ``T_ref_cam``) puts them (module docstring): each keyframe is warped into the reference camera by the homography
+    of the plane at the reference's median depth, then phase-correlated (gradient magnitudes, Hanning window, the
+    reference masked to where the keyframe reaches)."""
+    cfg = view.config
+    ref = _gradient_magnitude(view.image)
+    h, w = ref.shape
+    window = cv2.createHanningWindow((w, h), cv2.CV_32F)
+    finite = np.isfinite(view.depth_m)
+    depth = float(np.median(view.depth_m[finite])) if finite.any() else 1.0
+    K_ref_inv = np.linalg.inv(view.camera.K)
+    shifts = []
+    for image, T_ref_cam, cam in keyframes:
+        T = inverse(np.asarray(T_ref_cam, dtype=np.float64)) @ view.T_ref_camref  # reference camera -> keyframe
+        H = cam.K @ (T[:3, :3] + np.outer(T[:3, 3], [0.0, 0.0, 1.0 / depth])) @ K_ref_inv
+        kf = _gradient_magnitude(image)
+        flags = cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP
+        warped = cv2.warpPerspective(kf, H, (w, h), flags=flags)
+        reach = cv2.warpPerspective(np.ones_like(kf), H, (w, h), flags=cv2.INTER_NEAREST | cv2.WARP_INVERSE_MAP)
+        (dx, dy), _ = cv2.phaseCorrelate(ref * reach, warped, window)
+        shifts.append((dx, dy))
+    if not shifts:
+        return ImageShift((float("nan"), float("nan")), 0, 0)
+    xy = np.asarray(shifts, dtype=np.float64)
+    med = np.median(xy, axis=0)
+    agreeing = int(np.count_nonzero(np.linalg.norm(xy - med, axis=1) <= cfg.agree_px))
+    return ImageShift((float(med[0]), float(med[1])), agreeing, len(shifts))
 
 
 def restart_fits(points_cur: ArrayLike, reference: ReferenceCloud, T_ref_cur: Array, sigma: float,

@@ -237,6 +237,7 @@ def _run_racr(scene: Any, devices: _Devices, node: RacrNodeConfig, config: RacrE
         record.details["verification"] = {
             "verdict": v.verdict, "matches": v.matches, "agreeing": v.agreeing,
             "other_pose_inliers": v.other_pose_inliers, "disagreement_px": v.disagreement_px,
+            "shift": None if v.shift is None else asdict(v.shift),
             "restarts": None if v.restarts is None else asdict(v.restarts)}
 
 

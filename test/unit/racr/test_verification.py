@@ -50,6 +50,26 @@ def test_too_little_evidence_is_ambiguous(scene) -> None:
     assert result.verdict == "ambiguous" and result.agreeing < 6 and "unverified" in result.describe()
 
 
+def test_the_image_shift_sees_a_slide_under_a_lighting_change(scene) -> None:
+    """Under the varied lighting (a grazing side light) the keyframes, warped into the reference view by the
+    estimate and phase-correlated with the reference image, sit where a right estimate puts them (shift within
+    agree_px) and 3 cm off where a slid estimate does: about f * 3 cm / depth px, agreed by every keyframe."""
+    from lightfast.racr.verification import image_shift
+
+    ref = scene.reference
+    view = ReferenceView(ref.points_m, ref.T_ref_camref, ref.image, ref.camera)
+    kfs = [_keyframe(scene, o, "varied") for o in ([0.0, 0.0, 0.0], [0.02, 0.0, 0.0], [-0.02, 0.01, 0.0])]
+    right = image_shift(view, [(img, T, scene.camera) for img, T in kfs])
+    assert right.agreeing == 3 and right.norm_px <= view.config.agree_px, right
+    slide = make_transform(np.eye(3), [0.03, 0.0, 0.0])
+    wrong = image_shift(view, [(img, T @ slide, scene.camera) for img, T in kfs])
+    depth = float(np.median(view.depth_m[np.isfinite(view.depth_m)]))
+    expected_px = scene.camera.fx * 0.03 / depth
+    assert wrong.agreeing == 3 and abs(wrong.norm_px - expected_px) < 0.25 * expected_px, (wrong, expected_px)
+    verdict = verify(view, [(img, T @ slide, scene.camera) for img, T in kfs])
+    assert verdict.verdict == "failed" and "px" in verdict.describe(), verdict
+
+
 def _relief(kind: str, rng: np.random.Generator, n: int = 6000) -> np.ndarray:
     """Points of a 40 cm × 30 cm wall 1 m in front of the camera (z forward): a corrugation of period 4 cm along x
     (repetitive: it looks the same every 4 cm) or a few random bumps (unique)."""
