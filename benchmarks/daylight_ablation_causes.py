@@ -36,7 +36,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from lightfast.eval.daylight import InputChange, SequenceRun, evaluate_daylight  # noqa: E402
+from lightfast.eval.daylight import InputChange, SequenceRun, evaluate_daylight, pooled  # noqa: E402
 from lightfast.tracking.pipeline import TrackerConfig  # noqa: E402
 
 METHODS = ("proposed", "refl-f2m", "depth-only", "no-color-f2m")
@@ -55,15 +55,7 @@ def _slug(name: str) -> str:
 
 
 def _summary(runs: list[SequenceRun]) -> dict[str, dict[str, float]]:
-    out: dict[str, dict[str, float]] = {}
-    for m in METHODS:
-        rs = [r for r in runs if r.method == m]
-        frames = sum(len(r.frames) for r in rs)
-        lost = sum(r.losses for r in rs)
-        err = np.array([f.t_err_m for r in rs for f in r.frames if not f.lost])
-        out[m] = {"frames": frames, "lost": lost, "loss_pct": 100.0 * lost / max(frames, 1),
-                  "rmse_cm": 100.0 * float(np.sqrt(np.mean(err**2))) if len(err) else float("nan")}
-    return out
+    return {m: pooled([r for r in runs if r.method == m]) for m in METHODS}
 
 
 def _motion(sim_dir: Path, sequences: list[str]) -> list[dict[str, Any]]:

@@ -55,8 +55,8 @@ from lightfast.progress import track
 from lightfast.topics import COLOR_INFO_TOPIC, COLOR_TOPIC, DEPTH_TOPIC, GT_POSE_TOPIC
 from lightfast.tracking.pipeline import RGBDTracker, TrackerConfig
 
-__all__ = ["METHODS", "FrameRecord", "InputChange", "SequenceRun", "evaluate_daylight", "recording_frames",
-           "run_sequence", "scene_of", "sequence_files"]
+__all__ = ["METHODS", "FrameRecord", "InputChange", "SequenceRun", "evaluate_daylight", "method_configs",
+           "pooled", "recording_frames", "run_sequence", "scene_of", "sequence_files"]
 
 log = logging.getLogger(__name__)
 
@@ -143,6 +143,16 @@ class SequenceRun:
         return float(np.sqrt(np.mean(e**2))) if len(e) else math.nan
 
 
+def pooled(runs: Sequence[SequenceRun]) -> dict[str, float]:
+    """Frames, lost frames, loss in % and the RMSE (cm) over the tracked frames of all ``runs`` taken together (one
+    pool, not a mean of per-sequence figures)."""
+    frames = sum(len(r.frames) for r in runs)
+    lost = sum(r.losses for r in runs)
+    err = np.array([f.t_err_m for r in runs for f in r.frames if not f.lost])
+    return {"frames": frames, "lost": lost, "loss_pct": 100.0 * lost / max(frames, 1),
+            "rmse_cm": 100.0 * float(np.sqrt(np.mean(err**2))) if len(err) else float("nan")}
+
+
 def recording_frames(bag_dir: Path) -> Iterator[tuple[int, NDArray[np.uint8], NDArray[np.float32], PinholeCamera,
                                                      NDArray[np.float64]]]:
     """(stamp_ns, rgb, depth_m, camera, T_map_cam of the ground truth) per frame of a simulated recording, paired by
@@ -188,20 +198,27 @@ def sequence_sun_radiosity(seq_dir: Path, lmap: LightingMap) -> NDArray[np.float
     return sun_radiosity(lmap, sun_position(lmap.site, mid_ns).direction_map)
 
 
+def method_configs(method: str, tracker_config: TrackerConfig | None = None) -> tuple[TrackerConfig, RelightConfig]:
+    """The tracker's and the relighter's configuration of ``method`` (:data:`METHODS`) on top of ``tracker_config``
+    (default: the node's defaults)."""
+    if method not in METHODS:
+        raise DaylightEvalError(f"unknown method {method!r}; choose from {', '.join(METHODS)}")
+    mode, reference, brightness = METHODS[method]
+    return (dataclasses.replace(tracker_config or TrackerConfig(), mode=mode),
+            RelightConfig(reference=reference, method=brightness))
+
+
 def run_sequence(seq_dir: Path, lmap: LightingMap, method: str, *, max_frames: int | None = None,
                  progress: bool = True, sun_B: NDArray[np.float32] | None = None,
                  tracker_config: TrackerConfig | None = None, inputs: InputChange = InputChange()) -> SequenceRun:
     """Run one method over one recording with the §IV-C protocol (see the module docstring); ``inputs``: what-if
     changes to the recording (:class:`InputChange`)."""
-    if method not in METHODS:
-        raise DaylightEvalError(f"unknown method {method!r}; choose from {', '.join(METHODS)}")
+    tracker_cfg, relight_cfg = method_configs(method, tracker_config)
     files = sequence_files(seq_dir)
-    mode, reference, brightness = METHODS[method]
     info = json.loads(files["info"].read_text())
     frames_total = int(info["frames"])
     crf = load_crf(files["crf"])
-    relighter = DaylightRelighter(lmap, crf, config=RelightConfig(reference=reference, method=brightness))
-    tracker_cfg = dataclasses.replace(tracker_config or TrackerConfig(), mode=mode)
+    relighter = DaylightRelighter(lmap, crf, config=relight_cfg)
     run = SequenceRun(seq_dir.name, method)
     tracker: RGBDTracker | None = None
     n = frames_total if max_frames is None else min(frames_total, max_frames)
@@ -482,15 +499,15 @@ CODE = ("daylight", "tracking", "eval/daylight.py", "bag", "geometry", "camera.p
 def _run_key(seq_dir: Path, method: str, map_meta: dict, max_frames: int | None,
              tracker_config: TrackerConfig | None = None, inputs: InputChange = InputChange()) -> str:
     """A hash of everything that decides one run's outcome (:mod:`lightfast.eval.cache`)."""
-    _, reference, brightness = METHODS[method]
+    tracker_cfg, relight_cfg = method_configs(method, tracker_config)
     parts = {
         "protocol": PROTOCOL_VERSION,
         "recording": content_digest(seq_dir),  # every file: another seed or simulator version is another input
         "code": code_version(*CODE),
         "map": {k: map_meta.get(k) for k in ("mesh_sha256", "config", "site", "version")},
         "method": method,
-        "tracker": dataclasses.asdict(dataclasses.replace(tracker_config or TrackerConfig(), mode=METHODS[method][0])),
-        "relight": dataclasses.asdict(RelightConfig(reference=reference, method=brightness)),
+        "tracker": dataclasses.asdict(tracker_cfg),
+        "relight": dataclasses.asdict(relight_cfg),
         "max_frames": max_frames,
     }
     if inputs != InputChange():  # the recording as it is keeps the keys of runs stored before this option existed
