@@ -4,8 +4,9 @@ default configuration through ``lightfast eval racr`` / ``lightfast eval vtr`` (
 
 * ``racr``: scene sets 90274 and 62239 (round 2; 20 scenes each), methods rACR, rACR serial and ACR under the
   ``varied`` lighting, rACR also under ``similar`` on 90274. Writes
-  ``benchmarks/results/eval_racr/heldout_summary.json`` and ``heldout_table.md``: success (AFD < 3 px), median AFD, the share of failures the method reported itself
-  (failed/ambiguous), the share of successes it did not claim, parallel vs serial total time, ACR beside it.
+  ``benchmarks/results/eval_racr/heldout_summary.json`` and ``heldout_table.md``: success (AFD < 3 px), median AFD,
+  the share of failures the method reported itself (failed/ambiguous), the share of successes it did not claim,
+  parallel vs serial total time, ACR beside it.
 * ``vtr``: routes 2718 and 3141 (300 m, 320×240, 1 Hz, the teach and all ten repeats), modes fused and grey. Writes
   ``benchmarks/results/eval_vtr/heldout_summary.json`` and ``heldout_table.md``: strict autonomy (published score
   beside it), false accepts of the whole-map search over 5 m.
