@@ -40,9 +40,21 @@ from lightfast.node_options import SensorInputOptions, StampOptions
 from lightfast.tracking.errors import TrackingError, TrackingInputError
 from lightfast.tracking.rgbd_odometry import AlignResult, RGBDFrame, TrackingConfig, align_frames, prepare_frame
 
-__all__ = ["CoarseEstimate", "F2FJob", "F2MJob", "RGBDTracker", "TrackResult", "TrackerConfig"]
+__all__ = ["CoarseEstimate", "F2FJob", "F2MJob", "RGBDTracker", "TrackResult", "TrackerConfig", "f2m_rejection"]
 
 log = logging.getLogger(__name__)
+
+
+def f2m_rejection(result: AlignResult, config: TrackerConfig) -> str:
+    """Why an f2m result is not used (the frame keeps its f2f pose), or "" when it is: it did not converge, or its
+    correction of T≈ exceeds ``max_f2m_correction_m`` / ``max_f2m_correction_deg``."""
+    if not result.converged:
+        return "f2m did not converge"
+    dt = float(np.linalg.norm(result.T_target_source[:3, 3]))
+    dr = float(rotation_angle_deg(result.T_target_source[:3, :3]))
+    if dt > config.max_f2m_correction_m or dr > config.max_f2m_correction_deg:
+        return f"f2m correction too large ({dt:.3f} m, {dr:.1f} deg)"
+    return ""
 
 
 @dataclass(frozen=True)
@@ -365,14 +377,9 @@ class RGBDTracker:
         res, seconds = job.result, {"f2m": job.seconds}
         if res is None:
             return self._finish(stamp, p.T_best, "f2f", "reference has no valid depth", None, seconds)
-        cfg = self.config
-        dt = float(np.linalg.norm(res.T_target_source[:3, 3]))
-        dr = float(rotation_angle_deg(res.T_target_source[:3, :3]))
-        if not res.converged:
-            return self._finish(stamp, p.T_best, "f2f", "f2m did not converge", res, seconds)
-        if dt > cfg.max_f2m_correction_m or dr > cfg.max_f2m_correction_deg:
-            return self._finish(stamp, p.T_best, "f2f", f"f2m correction too large ({dt:.3f} m, {dr:.1f} deg)",
-                                res, seconds)
+        rejected = f2m_rejection(res, self.config)
+        if rejected:
+            return self._finish(stamp, p.T_best, "f2f", rejected, res, seconds)
         # the reference was rendered at T≈ as published; later re-chaining of T_best does not move it
         return self._finish(stamp, p.T_coarse @ res.T_target_source, "f2m", "", res, seconds)
 

@@ -2,6 +2,7 @@
 motion table on real poses (the evaluations it runs are tested in test_eval_daylight.py)."""
 from __future__ import annotations
 
+import dataclasses
 import importlib.util
 import sys
 from pathlib import Path
@@ -32,7 +33,13 @@ def test_each_variant_changes_one_thing_and_survives_the_option_list(causes: Mod
     base_tracker, base_inputs = causes.VARIANTS["as recorded"]
     assert base_tracker == TrackerConfig() and base_inputs == InputChange()
     for name, (tracker, inputs) in causes.VARIANTS.items():
-        changed = (tracker != base_tracker) + (inputs.frame_step != 1) + (inputs.depth_hole_grow_px != 0)
+        prior = tracker.pose_prior_weight != base_tracker.pose_prior_weight
+        unchecked = (tracker.max_f2m_correction_m, tracker.max_f2m_correction_deg) != (
+            base_tracker.max_f2m_correction_m, base_tracker.max_f2m_correction_deg)
+        assert tracker == dataclasses.replace(base_tracker, pose_prior_weight=tracker.pose_prior_weight,
+                                              max_f2m_correction_m=tracker.max_f2m_correction_m,
+                                              max_f2m_correction_deg=tracker.max_f2m_correction_deg), name
+        changed = prior + unchecked + (inputs.frame_step != 1) + (inputs.depth_hole_grow_px != 0)
         assert changed == (0 if name == "as recorded" else 2 if " + " in name else 1), name
 
 

@@ -35,11 +35,13 @@ def test_perturbations_have_the_asked_size_in_random_directions(terms: ModuleTyp
 
 
 def test_summary_per_reference_and_term(terms: ModuleType) -> None:
-    rows = [{"reference": "relit", "term": "geometry", "start_t_m": 0.03, "t_m": t, "r_deg": 0.5}
-            for t in (0.01, 0.02, 0.04, 0.2)]
+    rows = [{"reference": "relit", "term": "geometry", "start_t_m": 0.03, "start_r_deg": 1.0, "t_m": t, "r_deg": 0.5,
+             "accepted": ok} for t, ok in ((0.01, True), (0.02, True), (0.04, True), (0.2, True), (0.3, False))]
     s = terms.summarize(rows)["relit"]["geometry"]
-    assert s["frames"] == 4 and s["t_median_cm"] == pytest.approx(3.0)
-    assert s["worse_than_start_pct"] == 50.0 and s["beyond_loss_pct"] == 25.0  # 0.2 m is beyond 10 cm
+    assert s["frames"] == 5 and s["accepted_pct"] == 80.0 and s["t_median_cm"] == pytest.approx(4.0)
+    # the rejected 0.3 m result: the tracker keeps the start (3 cm)
+    assert s["kept_t_median_cm"] == pytest.approx(3.0)
+    assert s["worse_than_start_pct"] == 40.0 and s["beyond_loss_pct"] == 20.0  # 0.2 m is beyond 10 cm
     assert set(terms.summarize(rows)) == {"relit"}
 
 
