@@ -16,7 +16,8 @@ ablation cannot separate without views where it is not.
 
     .venv/bin/python benchmarks/daylight_f2m_terms.py SIM_DIR --maps MAPS [--sequences A,B] [--step 10]
 
-Writes ``OUT/f2m_terms.md`` and ``OUT/f2m_terms.json`` (default OUT: ``benchmarks/results/eval_daylight/heldout``).
+Writes ``OUT/f2m_terms_<shift>cm_<turn>deg.md`` and ``.json`` (default OUT:
+``benchmarks/results/eval_daylight/heldout``).
 """
 from __future__ import annotations
 
@@ -95,12 +96,12 @@ def study(seq_dir: Path, lmap: LightingMap, *, step: int, shift_m: float, turn_d
                 try:
                     res = align_frames(live, target, config=f2m, use_color=use_color, use_depth=use_depth)
                     t_err, r_err = _errors(T_start @ res.T_target_source, T_gt)
-                    accepted = not f2m_rejection(res, cfg)
-                except TrackingError:
-                    t_err, r_err, accepted = start_t, start_r, False
+                    rejection = f2m_rejection(res, cfg)
+                except TrackingError as exc:
+                    t_err, r_err, rejection = start_t, start_r, str(exc)
                 rows.append({"sequence": seq_dir.name, "frame": i, "reference": ref_kind, "term": term,
                              "start_t_m": start_t, "start_r_deg": start_r, "t_m": t_err, "r_deg": r_err,
-                             "accepted": accepted})
+                             "accepted": not rejection, "not_converged": rejection == "f2m did not converge"})
     return rows
 
 
@@ -119,6 +120,7 @@ def summarize(rows: list[dict[str, Any]]) -> dict[str, dict[str, dict[str, float
             lost = (t_kept > LOSS_TRANSLATION_M) | (a_kept > LOSS_ROTATION_DEG)
             out.setdefault(ref, {})[term] = {
                 "frames": len(rs), "accepted_pct": 100 * float(np.mean(ok)),
+                "not_converged_pct": 100 * float(np.mean([r.get("not_converged", False) for r in rs])),
                 "t_median_cm": 100 * float(np.median(t)), "t_p90_cm": 100 * float(np.percentile(t, 90)),
                 "r_median_deg": float(np.median(a)), "r_p90_deg": float(np.percentile(a, 90)),
                 "kept_t_median_cm": 100 * float(np.median(t_kept)),
@@ -141,14 +143,16 @@ def _markdown(summary: dict[str, dict[str, dict[str, float]]], args: argparse.Na
         "f2m's own result (raw) and what the tracker keeps: f2m's pose when it converged within "
         "max_f2m_correction (accepted), else T≈ (pipeline.f2m_rejection).",
         "",
-        "| reference | term | frames | raw translation median / p90 [cm] | raw rotation median / p90 [°] | accepted | "
+        "| reference | term | frames | raw translation median / p90 [cm] | raw rotation median / p90 [°] | accepted "
+        "(rejected: not converged) | "
         "kept translation median / p90 [cm] | kept worse than the start | kept beyond loss |",
         "|---|---|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for ref, per in summary.items():
         for term, s in per.items():
             lines.append(f"| {ref} | {term} | {s['frames']} | {s['t_median_cm']:.2f} / {s['t_p90_cm']:.2f} | "
-                         f"{s['r_median_deg']:.2f} / {s['r_p90_deg']:.2f} | {s['accepted_pct']:.0f} % | "
+                         f"{s['r_median_deg']:.2f} / {s['r_p90_deg']:.2f} | {s['accepted_pct']:.0f} % "
+                         f"({s['not_converged_pct']:.0f} %) | "
                          f"{s['kept_t_median_cm']:.2f} / {s['kept_t_p90_cm']:.2f} | "
                          f"{s['worse_than_start_pct']:.1f} % | {s['beyond_loss_pct']:.1f} % |")
     return "\n".join(lines) + "\n"
@@ -190,8 +194,9 @@ def main(argv: list[str] | None = None) -> int:
         shown_path(a) if a.startswith("/") else a for a in (sys.argv[1:] if argv is None else argv))
     text = _markdown(summary, args, [s.name for s in seqs], command, time.perf_counter() - t0)
     args.out.mkdir(parents=True, exist_ok=True)
-    write_text_atomic(args.out / "f2m_terms.md", text)
-    write_text_atomic(args.out / "f2m_terms.json", json.dumps(json_finite(
+    stem = f"f2m_terms_{args.shift_cm:g}cm_{args.turn_deg:g}deg"
+    write_text_atomic(args.out / f"{stem}.md", text)
+    write_text_atomic(args.out / f"{stem}.json", json.dumps(json_finite(
         {"command": command, "summary": summary, "rows": rows}), indent=1) + "\n")
     print(text, end="")
     return 0
