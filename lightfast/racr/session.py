@@ -444,13 +444,7 @@ class RacrSession:
         except RacrError as exc:
             logger.info("restarts around the estimate failed: %s", exc)
             return result
-        if np.isfinite(restarts.better_ratio):
-            verdict = "failed"
-        elif np.isfinite(restarts.look_alike_px) or restarts.ran == 0:
-            verdict = "ambiguous"
-        else:
-            verdict = "verified"
-        return replace(result, verdict=verdict, restarts=restarts)
+        return replace(result, verdict=restarts.verdict, restarts=restarts)
 
     def _hand_eye_result(self, result: HandEyeResult) -> HandEyeResult:
         """The initialization's result as the scheme gets it: unchanged here; a study of the method's sensitivity

@@ -1,31 +1,23 @@
 """Self-check of a converged relocalization: does the reference image agree with the estimate? (issue 19; not in
-the paper, whose rACR reports convergence whenever g ≤ η, §3.5.)
+the paper, whose rACR reports convergence whenever g ≤ η, §3.5; docs/racr.md describes the checks.)
 
 The geometric alignment (§3.4) can converge to a wrong pose on a repetitive relief (sliding along a facade by its
-period), and g ≤ η then holds at the wrong place. The check uses evidence the alignment did not: SIFT matches between
-the reference image and the current VSE keyframe images (:func:`~lightfast.racr.acr_baseline.sift_matches`). Each
-reference keypoint gets a depth from the reference cloud (the nearest projected point, z-buffered, within
-``depth_radius_px``), is lifted into the reference frame and projected into the keyframe with the estimate
-(``T_ref_cam`` of the keyframe = ``T_p ⟨R_A, σ_p s t_A⟩``, Eq. 2–3). A match *agrees* when its keyframe keypoint
-lies within ``agree_px`` of that projection.
+period), and g ≤ η then holds at the wrong place. The checks use evidence the alignment did not, in this order:
 
-Verdict (:class:`Verification`): ``verified`` with at least ``min_agreeing`` agreeing matches; ``failed`` when the
-matches instead support another camera pose — a PnP RANSAC on them (cv2.solvePnPRansac) finds at least
-``min_other_pose`` inliers at a pose that moves the reference keypoints by more than ``agree_px`` on average from
-where the estimate puts them. Under a strong lighting change SIFT matches are few and mostly wrong; the image is then
-asked as a whole (:func:`image_shift`): each keyframe is warped into the reference view by the estimate (the
-homography of the plane at the reference's median depth, facing the reference camera) and its gradient magnitude
-(which keeps edges of the relief whichever side the light comes from) is phase-correlated with the reference's
-(cv2.phaseCorrelate). Where the estimate is right the shift is near zero; when at least ``shift_min_keyframes``
-keyframes agree within ``agree_px`` on a shift of more than ``agree_px``, the estimate is wrong by that shift
-(``failed``; chance peaks scatter over the whole image, two landing within a few px of each other are not chance). A
-shift near zero does not verify (it cannot tell a few px, the success criterion's scale). When neither cue can tell,
-the geometry is asked instead (:func:`restart_fits`): the fast alignment is restarted from the estimate shifted across
-the view by 5–40 % of the scene's depth (the view moves by roughly 4–35 % of its width: a wrong convergence can lie
-that far, seen at 40 % on development scenes). A restart whose fit moves the current points by more than ``agree_px``
-in the reference image is another fit: a clearly better one (fitness above the estimate's by the factor 1 /
-``basin_fitness_ratio``) means the estimate is a local minimum (``failed``), a comparable one is a look-alike (a
-repetitive relief: ``ambiguous``), none means the fit is unique around the estimate (``verified`` by the geometry).
+1. SIFT matches between the reference image and the current VSE keyframes (:func:`verify`): each reference keypoint
+   is lifted to 3-D with the reference cloud (the nearest projected point within ``depth_radius_px``) and projected
+   into the keyframe with the estimate (``T_ref_cam = T_p ⟨R_A, σ_p s t_A⟩``, Eq. 2–3); it *agrees* within
+   ``agree_px``. ``min_agreeing`` agreeing matches verify; a PnP RANSAC pose elsewhere with ``min_other_pose``
+   inliers that moves the keypoints by more than ``agree_px`` makes the convergence ``failed``.
+2. The image as a whole, when matches cannot tell (:func:`image_shift`): each keyframe is warped into the reference
+   view by the estimate (the homography of the plane at the reference's median depth) and its gradient magnitude
+   (edges of the relief stay edges whichever side the light comes from) is phase-correlated with the reference's.
+   ``shift_min_keyframes`` keyframes agreeing within ``agree_px`` on a shift beyond ``agree_px``: ``failed`` (chance
+   peaks scatter over the image). A shift near zero does not verify: it cannot resolve the success criterion's px.
+3. The geometry, when neither image cue can tell (:func:`restart_fits`): the fast alignment restarted from the
+   estimate shifted across the view by ``basin_shifts_depth`` of the scene's depth. A fit that moves the points by
+   more than ``agree_px`` in the reference image is another fit: clearly better (fitness ×1/``basin_fitness_ratio``)
+   ``failed``, comparable ``ambiguous``, none ``verified`` by the geometry.
 
 Inputs: the reference cloud (metres, reference frame), its camera and pose, the reference image; keyframes as (image in
 [0, 1], ``T_ref_cam`` in metres, camera).
@@ -96,6 +88,14 @@ class Restarts:
     better_px: float = float("nan")
     better_ratio: float = float("nan")
 
+    @property
+    def verdict(self) -> str:
+        """``failed`` with a clearly better fit elsewhere, ``ambiguous`` with a look-alike or when no restart ran,
+        else ``verified``."""
+        if np.isfinite(self.better_ratio):
+            return "failed"
+        return "ambiguous" if np.isfinite(self.look_alike_px) or self.ran == 0 else "verified"
+
 
 @dataclass(frozen=True)
 class ImageShift:
@@ -139,7 +139,7 @@ class Verification:
             return (f"a look-alike fit {r.look_alike_px:.1f} px away is as good (fitness x{r.look_alike_ratio:.2f}; "
                     f"{image})")
         sh = self.shift
-        if self.verdict == "failed" and sh is not None and sh.norm_px > 0 and self.other_pose_inliers == 0:
+        if self.verdict == "failed" and sh is not None:  # failed by the image shift (a PnP failure has none)
             return (f"the reference image is shifted {sh.norm_px:.1f} px from where the estimate puts it "
                     f"({sh.agreeing} of {sh.keyframes} keyframes agree; {image})")
         if self.verdict == "failed":

@@ -102,10 +102,11 @@ def test_restarts_find_the_look_alike_of_a_repetitive_relief() -> None:
         assert r.ran > 0, r
         if kind == "corrugated":
             assert abs(r.look_alike_px - 20.0) < 5.0 and r.look_alike_ratio >= 0.9 and np.isnan(r.better_ratio), r
+            assert r.verdict == "ambiguous"
             # the current view is the wall's last 10 cm, held one period further out: 4 cm of it off the wall
             part = cur[cur[:, 0] > 0.1]
             off = make_transform(np.eye(3), [0.04, 0.0, 0.0])
             r = restart_fits(part, ReferenceCloud.from_config(ref_pts, fast), off, 1.0, np.eye(4), view, fast)
-            assert r.better_ratio > 1.0 / 0.9 and r.better_px > 15.0, r
+            assert r.better_ratio > 1.0 / 0.9 and r.better_px > 15.0 and r.verdict == "failed", r
         else:
-            assert np.isnan(r.look_alike_px) and np.isnan(r.better_px), r
+            assert np.isnan(r.look_alike_px) and np.isnan(r.better_px) and r.verdict == "verified", r
