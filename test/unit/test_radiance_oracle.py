@@ -140,7 +140,9 @@ def test_room_sky_is_positive_and_largest_near_window(room) -> None:
     probes = np.array([[2.25, 0.6, 0.0], [2.25, 4.4, 0.0]])
     pts = np.concatenate([p, probes])
     nrm = np.concatenate([n, np.tile([0.0, 0.0, 1.0], (2, 1))])
-    E = radiance_irradiance(room, pts, nrm, component="sky", ambient_divisions=1024)
+    # 8 independent estimates: one estimate of the dim far probe scatters by ±15 % between runs (rtrace's two
+    # processes draw other samples), which put the near/far ratio (3.6 with 32 estimates) at 2.9 once in CI
+    E = radiance_irradiance(room, pts, nrm, component="sky", ambient_divisions=1024, repeats=8)
     assert np.all(E > 0.0)
     near_probe, far_probe = E[-2:, 1]
     assert near_probe > 3.0 * far_probe
