@@ -1,6 +1,7 @@
 """Helpers shared by tests: bounded subprocesses and in-process ROS sessions."""
 from __future__ import annotations
 
+import importlib.util
 import os
 import signal
 import subprocess
@@ -8,6 +9,7 @@ import sys
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
+from types import ModuleType
 
 from lightfast.ros.transport import local_transport_env
 
@@ -49,3 +51,15 @@ def run_bounded(cmd: Sequence[str], *, timeout_s: float, env: dict[str, str] | N
     with bounded_process(cmd, timeout_s=timeout_s, env=env) as proc:
         out, err = proc.communicate(input=input_text, timeout=timeout_s + 15)
     return subprocess.CompletedProcess(proc.args, proc.returncode, out, err)
+
+
+def load_benchmark(name: str) -> ModuleType:
+    """``benchmarks/<name>.py`` imported as module ``name`` (registered in sys.modules: dataclasses look their
+    module up)."""
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / f"{name}.py"
+    spec = importlib.util.spec_from_file_location(name, path)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module
+    spec.loader.exec_module(module)
+    return module

@@ -3,8 +3,6 @@ motion table on real poses (the evaluations it runs are tested in test_eval_dayl
 from __future__ import annotations
 
 import dataclasses
-import importlib.util
-import sys
 from pathlib import Path
 from types import ModuleType
 
@@ -12,19 +10,14 @@ import pytest
 
 from lightfast.eval.daylight import InputChange
 from lightfast.tracking.pipeline import TrackerConfig
+from test.helpers import load_benchmark
 
 ROOT = Path(__file__).resolve().parents[2]
 
 
 @pytest.fixture(scope="module")
 def causes() -> ModuleType:
-    spec = importlib.util.spec_from_file_location("daylight_ablation_causes",
-                                                  ROOT / "benchmarks" / "daylight_ablation_causes.py")
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module
-    spec.loader.exec_module(module)
-    return module
+    return load_benchmark("daylight_ablation_causes")
 
 
 def test_each_variant_changes_one_thing_and_survives_the_option_list(causes: ModuleType) -> None:

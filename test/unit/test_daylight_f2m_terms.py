@@ -2,8 +2,6 @@
 relighter and the alignment it calls are tested in their own modules)."""
 from __future__ import annotations
 
-import importlib.util
-import sys
 from pathlib import Path
 from types import ModuleType
 
@@ -11,18 +9,14 @@ import numpy as np
 import pytest
 
 from lightfast.geometry import rotation_angle_deg
+from test.helpers import load_benchmark
 
 ROOT = Path(__file__).resolve().parents[2]
 
 
 @pytest.fixture(scope="module")
 def terms() -> ModuleType:
-    spec = importlib.util.spec_from_file_location("daylight_f2m_terms", ROOT / "benchmarks" / "daylight_f2m_terms.py")
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module
-    spec.loader.exec_module(module)
-    return module
+    return load_benchmark("daylight_f2m_terms")
 
 
 def test_perturbations_have_the_asked_size_in_random_directions(terms: ModuleType) -> None:

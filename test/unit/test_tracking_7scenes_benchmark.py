@@ -3,11 +3,9 @@
 a folder without ``camera-intrinsics.txt`` (the download has none: the 7-Scenes intrinsics stand in)."""
 from __future__ import annotations
 
-import importlib.util
 import json
 import math
 import shutil
-import sys
 from pathlib import Path
 from types import ModuleType
 
@@ -15,17 +13,14 @@ import cv2
 import numpy as np
 import pytest
 
+from test.helpers import load_benchmark
+
 ROOT = Path(__file__).resolve().parents[2]
 FIRST = 500  # the fake folder's first frame number
 
 
 def _benchmark() -> ModuleType:
-    spec = importlib.util.spec_from_file_location("tracking_7scenes", ROOT / "benchmarks" / "tracking_7scenes.py")
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module  # dataclasses look their module up
-    spec.loader.exec_module(module)
-    return module
+    return load_benchmark("tracking_7scenes")
 
 
 def _fake_sequence(src: Path, dst: Path, count: int, scale: float, intrinsics: bool) -> Path:
