@@ -268,8 +268,9 @@ def restart_fits(points_cur: ArrayLike, reference: ReferenceCloud, T_ref_cur: Ar
     here = fast_align(pts, reference, T_ref_cur_init=T_ref_cur, sigma_init=sigma, config=fast_config)
     sample = pts[np.random.default_rng(0).choice(len(pts), min(len(pts), 2000), replace=False)]
     T_camref_ref = inverse(view.T_ref_camref)
-    uv_here, ok_here = view.camera.project(transform_points(T_camref_ref, here.transform(sample)))
-    z_cam = transform_points(inverse(T_ref_cam), here.transform(sample))[:, 2]
+    x_here = here.transform(sample)
+    uv_here, ok_here = view.camera.project(transform_points(T_camref_ref, x_here))
+    z_cam = transform_points(inverse(T_ref_cam), x_here)[:, 2]
     depth = float(np.median(z_cam[z_cam > 0])) if np.any(z_cam > 0) else 0.0
     found = Restarts(0)
     for d in config.basin_shifts_depth:
