@@ -71,7 +71,7 @@ def _cmd_sim_vtr(args: argparse.Namespace) -> int:
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
     """``lightfast sim`` and its simulators (imports their modules for the choices and defaults)."""
-    from lightfast.sim.daylight.sequences import SEQUENCES
+    from lightfast.sim.daylight.sequences import HELDOUT_SEQUENCES, SEQUENCES
     from lightfast.sim.racr import DEFAULT_RESOLUTION_M
     from lightfast.sim.vtr.recordings import DEFAULT_RUNS, TABLE_I
     from lightfast.sim.vtr.scene import RouteConfig
@@ -84,8 +84,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         description="Render the simulated indoor daylight RGB-D sequences DS1.T1-T6 and DS2.T1-T6 (MCAP bags + "
                     "truth).")
     p.add_argument("out", type=Path, help="output directory")
-    p.add_argument("--sequences", nargs="+", metavar="NAME", choices=[s.name for s in SEQUENCES],
-                   help="sequences to render (default: all 12)")
+    p.add_argument("--sequences", nargs="+", metavar="NAME", choices=[s.name for s in SEQUENCES + HELDOUT_SEQUENCES],
+                   help="sequences to render (default: the 12 of Table I; the held-out DS3.H1-H3 and DS2.H1 of "
+                        "issue 21 by name only)")
     p.add_argument("--frames", type=int, default=600, help="frames per sequence (30 Hz; default 600)")
     p.add_argument("--size", type=image_size("320x240"), default=(320, 240), help="image size WxH (default 320x240)")
     p.add_argument("--resolution", type=float, default=None, help="scene mesh resolution in m (default 0.02)")

@@ -57,8 +57,8 @@ from lightfast.tracking.rgbd_odometry import prepare_frame
 from lightfast.tracking.rgbd_odometry.kernels import linearize
 
 __all__ = ["FrameRegime", "RegimeScene", "analyze_frame", "analyze_recording", "conditioning",
-           "load_scene", "motion_errors", "point_to_plane_information", "summarize", "table_markdown",
-           "weak_direction_information"]
+           "load_scene", "motion_errors", "point_to_plane_information", "regime_check", "summarize",
+           "table_markdown", "weak_direction_information"]
 
 #: An eigenvalue below this share of λ_max is a weak direction: 10× less information than the best one in std.
 WEAK_EIGEN_RATIO = 1e-2
@@ -70,6 +70,11 @@ SUNLIT_LOSS_IMAGE_SHARE = 0.10
 DARK_EXPOSURE = 0.01
 #: Shadow-ray origins move this far along the surface normal (m): clear of the own triangle at float32 precision.
 SHADOW_OFFSET_M = 1e-3
+#: A frame is shadow-dominated when sun-patch edges hold at least this share of its grey gradient energy.
+SHADOW_DOMINATED_SHARE = 0.5
+#: A recording is in the paper's regime when at least this share of its frames are regime frames (weak geometry and
+#: shadow-dominated) and at least this share lose a large sunlit area of depth (:func:`regime_check`).
+REGIME_FRAME_SHARE = 0.20
 _GREY = np.array([0.299, 0.587, 0.114])  # Rec. 601, as the tracker's grey
 _NAN = math.nan
 
@@ -411,6 +416,27 @@ def summarize(frames: list[FrameRegime]) -> dict[str, Any]:
                                                     for f in frames]))
     doc["thresholds"] = {"weak_eigen_ratio": WEAK_EIGEN_RATIO, "photo_strong_ratio": PHOTO_STRONG_RATIO,
                          "sunlit_loss_image_share": SUNLIT_LOSS_IMAGE_SHARE, "dark_exposure": DARK_EXPOSURE}
+    return doc
+
+
+def regime_check(frames: list[FrameRegime]) -> dict[str, Any]:
+    """Is a recording in the regime where the paper's relit reference matters (Krawez et al. §I: tracking "may fail in
+    frames where shadows induce the dominant image gradients"; §IV-D: depth is lost in direct sun)? Written down
+    before the held-out recordings of issue 21 were rendered (benchmarks/results/HELDOUT.md).
+
+    Regime frames: geometry leaves a direction free (``geo_weak`` ≥ 1: depth alone cannot hold the pose) and
+    sun-patch edges hold at least :data:`SHADOW_DOMINATED_SHARE` of the grey gradient energy (a reflectance reference
+    contradicts the image there, a relit one explains it). In the regime: regime frames and frames with large sunlit
+    depth loss (> :data:`SUNLIT_LOSS_IMAGE_SHARE` of the image) each at least :data:`REGIME_FRAME_SHARE` of all
+    frames. Returns both shares and ``in_regime``."""
+    if not frames:
+        raise DaylightEvalError("no frames to check")
+    regime = [f.geo_weak >= 1 and f.sun_edge_share >= SHADOW_DOMINATED_SHARE for f in frames]  # NaN: False
+    loss = [f.sunlit_no_depth_image > SUNLIT_LOSS_IMAGE_SHARE for f in frames]
+    doc = {"regime_frames": float(np.mean(regime)), "large_sunlit_depth_loss": float(np.mean(loss)),
+           "frames": len(frames)}
+    doc["in_regime"] = bool(doc["regime_frames"] >= REGIME_FRAME_SHARE
+                            and doc["large_sunlit_depth_loss"] >= REGIME_FRAME_SHARE)
     return doc
 
 

@@ -19,6 +19,7 @@ from lightfast.eval.daylight_regime import (
     analyze_recording,
     conditioning,
     motion_errors,
+    regime_check,
     summarize,
     table_markdown,
     weak_direction_information,
@@ -202,6 +203,23 @@ def test_bad_input_raises(tmp_path: Path) -> None:
         analyze_frame(rgb, depth, CAMERA, np.full((4, 4), np.nan), scene, SUN_UP)
     with pytest.raises(DaylightEvalError):
         summarize([])
+    with pytest.raises(DaylightEvalError):
+        regime_check([])
+
+
+def test_regime_needs_weak_shadow_dominated_frames_and_sunlit_depth_loss() -> None:
+    def frames(n_regime: int, n_loss: int, n: int = 10) -> list[FrameRegime]:
+        return [FrameRegime(i, i, geo_weak=1.0 if i < n_regime else 0.0, sun_edge_share=0.6,
+                            sunlit_no_depth_image=0.2 if i < n_loss else 0.0) for i in range(n)]
+
+    assert regime_check(frames(2, 2)) == {"regime_frames": 0.2, "large_sunlit_depth_loss": 0.2, "frames": 10,
+                                          "in_regime": True}
+    assert not regime_check(frames(1, 10))["in_regime"]  # depth loss alone is not the regime
+    assert not regime_check(frames(10, 1))["in_regime"]
+    weak_no_shadow = [FrameRegime(i, i, geo_weak=3.0, sun_edge_share=0.4, sunlit_no_depth_image=0.5)
+                      for i in range(10)]
+    assert regime_check(weak_no_shadow)["regime_frames"] == 0.0  # texture or geometry edges dominate
+    assert regime_check([FrameRegime(0, 0)])["regime_frames"] == 0.0  # undefined (NaN) measures count as no
 
 
 def test_table_lists_every_recording() -> None:

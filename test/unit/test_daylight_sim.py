@@ -5,6 +5,7 @@ from __future__ import annotations
 import datetime as dt
 import json
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -21,7 +22,7 @@ from lightfast.sim.daylight.renderer import GroundTruthRenderer
 from lightfast.sim.daylight.rooms import make_ds1, make_ds2, make_ds3
 from lightfast.sim.daylight.scene import RHO_MAX, RHO_MIN
 from lightfast.sim.daylight.sensors import CameraResponse, DepthSensor
-from lightfast.sim.daylight.sequences import camera_for_size, cloud_transmittance
+from lightfast.sim.daylight.sequences import SEQUENCES, camera_for_size, cloud_transmittance
 from lightfast.sim.daylight.trajectory import hand_held_trajectory
 from lightfast.sim.sky_model import (
     CIE_CLEAR_SKY,
@@ -314,6 +315,7 @@ def test_tiny_recording_roundtrip_caching_and_determinism(tmp_path: Path) -> Non
         assert frame == "map" and 0.5 < T[2, 3] < 2.0
         first_img = bytes(msgs[0].data)
     assert meta["frames"] == 4 and meta["sequence"]["clouds"] is True
+    assert "sunlit_gaze_share" not in meta["params"]["spec"]  # added later: recordings made before keep their hash
     # a complete sequence is skipped
     mtime = (seq / "sequence.json").stat().st_mtime_ns
     generate_daylight_set(out, sequences=["DS1.T6"], **TINY)
@@ -338,6 +340,19 @@ def test_cli_entry_point(tmp_path: Path) -> None:
     assert meta["params"]["width"] == 32 and meta["frames"] == 2
     with pytest.raises(SystemExit):
         cli.main(["sim", "daylight", str(tmp_path / "out"), "--size", "32by24"])
+
+
+def test_held_out_recordings_by_name_only(tmp_path: Path) -> None:
+    from lightfast import cli
+
+    args = ["--frames", "2", "--size", "32x24", "--resolution", "0.25", "--supersample", "1", "--no-progress"]
+    assert cli.main(["sim", "daylight", str(tmp_path / "out"), "--sequences", "DS3.H1", *args]) == 0
+    meta = json.loads((tmp_path / "out" / "DS3.H1" / "sequence.json").read_text())
+    assert meta["sequence"]["scene"] == "DS3" and meta["params"]["spec"]["sunlit_gaze_share"] == 0.8
+    assert (tmp_path / "out" / "scenes" / "DS3.map.ply").is_file()
+    assert not any(s.name.endswith(".H1") for s in SEQUENCES)  # the default set is Table I's twelve
+    with pytest.raises(ValueError, match="sunlit_gaze_share"):
+        replace(SEQUENCES[0], sunlit_gaze_share=1.5)
 
 
 def _wall_with_box() -> ReflectanceMesh:

@@ -58,6 +58,7 @@ from lightfast.sim.daylight.scene import DaylightScene, window_opening
 from lightfast.sim.daylight.sensors import CameraResponse, DepthSensor
 from lightfast.sim.daylight.sequences import (
     DEFAULT_CACHE,
+    HELDOUT_SEQUENCES,
     SEQUENCES,
     SequenceSpec,
     camera_for_size,
@@ -90,7 +91,16 @@ FORMAT_VERSION = 3  # 2: gaze angular rates limited (the look-at gaze whipped at
 # 3: depth from the depth camera (time offset, registration error, projector shadow, correlated + systematic error)
 #: Bump when the reconstructed map of the same scene changes.
 MAP_FORMAT_VERSION = 4  # 2, 3: zero-area slivers (also after float32 rounding), non-manifold edges removed; 4: planes
-_BY_NAME = {s.name: s for s in SEQUENCES}
+_BY_NAME = {s.name: s for s in SEQUENCES + HELDOUT_SEQUENCES}
+
+
+def _spec_params(spec: SequenceSpec) -> dict[str, Any]:
+    """The spec's part of a recording's parameter hash; a field added later is left out at its default, so the
+    recordings made before it keep their hash."""
+    doc = asdict(spec)
+    if spec.sunlit_gaze_share == 0.4:
+        del doc["sunlit_gaze_share"]
+    return doc
 
 
 # ----------------------------------------------------------------------------------------------------------------
@@ -207,7 +217,8 @@ def _generate_sequence(spec: SequenceSpec, scene: DaylightScene, renderer: Groun
     sunlit = pos[lit][rng_sel.choice(int(lit.sum()), size=min(2000, int(lit.sum())), replace=False)] \
         if lit.any() else None
     poses = hand_held_trajectory(scene, frames, rate_hz, np.random.default_rng([spec.seed, 3]),
-                                 sunlit_points=sunlit, surface_points=surface)
+                                 sunlit_points=sunlit, surface_points=surface,
+                                 sunlit_share=spec.sunlit_gaze_share)
     resp = _auto_exposure(renderer, cache, states, poses, CameraResponse())
     depth_sensor = DepthSensor()
     T_map_depth = depth_camera_poses(poses, rate_hz, depth_sensor)
@@ -337,8 +348,9 @@ def generate_daylight_set(
     site: Site | None = None,
     force: bool = False,
 ) -> list[Path]:
-    """Render the daylight sequences (default all 12 of :data:`SEQUENCES`) into ``out_dir``; returns the sequence
-    directories. Complete sequences with the same parameters are skipped (``force`` re-renders them).
+    """Render the daylight sequences (default all 12 of :data:`SEQUENCES`; also the held-out ones of
+    :data:`HELDOUT_SEQUENCES` by name) into ``out_dir``; returns the sequence directories. Complete sequences with
+    the same parameters are skipped (``force`` re-renders them).
 
     ``resolution_m`` is the scene mesh resolution (default 2 cm); ``cache_settings`` overrides the per-scene
     :data:`DEFAULT_CACHE`; ``site`` overrides Freiburg. Small values (e.g. ``frames=3, width=64, height=48,
@@ -347,7 +359,7 @@ def generate_daylight_set(
     names = list(sequences) if sequences else [s.name for s in SEQUENCES]
     unknown = [n for n in names if n not in _BY_NAME]
     if unknown:
-        raise ValueError(f"unknown sequence(s) {unknown}; choose from {[s.name for s in SEQUENCES]}")
+        raise ValueError(f"unknown sequence(s) {unknown}; choose from {list(_BY_NAME)}")
     if frames < 1 or width < 8 or height < 8:
         raise ValueError(f"need frames >= 1 and an image of at least 8x8, got {frames} frames {width}x{height}")
     out = Path(out_dir)
@@ -363,7 +375,7 @@ def generate_daylight_set(
         cfg = cache_settings or DEFAULT_CACHE[spec.scene]
         cfg = replace(cfg, seed=spec.seed)
         params = {
-            "format_version": FORMAT_VERSION, "spec": asdict(spec), "frames": frames, "width": width,
+            "format_version": FORMAT_VERSION, "spec": _spec_params(spec), "frames": frames, "width": width,
             "height": height, "rate_hz": rate_hz, "resolution_m": res, "supersample": supersample,
             "sun_samples": sun_samples, "cache": asdict(cfg),
             "site": (site.to_yaml() if site is not None else "default"),

@@ -3,9 +3,9 @@
 :func:`hand_held_trajectory` returns ``T_map_camera`` per frame ((N, 4, 4), colour camera optical frame: x right,
 y down, z forward; map frame, metres): a smooth walk at 0.2–0.5 m/s through the free middle of the room (PCHIP
 through random waypoints clear of the scene's furniture boxes, ≥ 0.8 m from the walls) at 1.15–1.75 m above the
-floor, looking at a sequence of targets (random surface points, ~40 % of them sunlit), with the gaze's yaw and
-pitch rates limited (:data:`MAX_YAW_RATE_DEG_S`, :data:`MAX_PITCH_RATE_DEG_S`), smooth roll (±4°) and 2–9 Hz hand
-jitter. Like the recordings of Krawez et al. (RA-L 2021) §IV-A, Fig. 6, made with a hand-held Asus Xtion.
+floor, looking at a sequence of targets (random surface points, by default 40 % of them sunlit), with the gaze's
+yaw and pitch rates limited (:data:`MAX_YAW_RATE_DEG_S`, :data:`MAX_PITCH_RATE_DEG_S`), smooth roll (±4°) and
+2–9 Hz hand jitter. Like the recordings of Krawez et al. (RA-L 2021) §IV-A, Fig. 6, made with a hand-held Asus Xtion.
 
 :func:`depth_camera_poses` gives ``T_map_depth`` per frame: the pose ``time_offset_s`` before each colour image
 times the depth sensor's registration error (:class:`~lightfast.sim.daylight.sensors.DepthSensor`).
@@ -46,13 +46,13 @@ def _rate_limited(x: NDArray[np.float64], max_step: float) -> NDArray[np.float64
 def hand_held_trajectory(scene: DaylightScene, n_frames: int, rate_hz: float, rng: np.random.Generator, *,
                          sunlit_points: NDArray[np.float64] | None = None,
                          surface_points: NDArray[np.float64] | None = None,
-                         wall_margin_m: float = 0.8) -> NDArray[np.float64]:
+                         wall_margin_m: float = 0.8, sunlit_share: float = 0.4) -> NDArray[np.float64]:
     """Camera poses ``(n_frames, 4, 4)`` (T_map_camera, optical frame): a smooth walk at 0.2–0.5 m/s through the
-    free middle of the room (PCHIP through random waypoints, so it never overshoots them) at 1.15–1.75 m,
-    looking at a sequence of targets (random surface points, ~40 % of them sunlit), with smooth roll (±4°) and
-    2–9 Hz hand jitter (≈ 0.3° and ≈ 1.5 mm rms). The gaze follows the targets with its yaw and pitch rates limited
-    to :data:`MAX_YAW_RATE_DEG_S` and :data:`MAX_PITCH_RATE_DEG_S` (a target passing close by would otherwise whip
-    the camera round at hundreds of degrees per second)."""
+    free middle of the room (PCHIP through random waypoints, so it never overshoots them) at 1.15–1.75 m, looking at
+    a sequence of targets (random surface points, a share ``sunlit_share`` of them sunlit), with smooth roll (±4°)
+    and 2–9 Hz hand jitter (≈ 0.3° and ≈ 1.5 mm rms). The gaze follows the targets with its yaw and pitch rates
+    limited to :data:`MAX_YAW_RATE_DEG_S` and :data:`MAX_PITCH_RATE_DEG_S` (a target passing close by would
+    otherwise whip the camera round at hundreds of degrees per second)."""
     W, D, _ = scene.room_size_m
     lo = np.array([wall_margin_m, wall_margin_m, 1.15])
     hi = np.array([W - wall_margin_m, D - wall_margin_m, 1.75])
@@ -90,7 +90,7 @@ def hand_held_trajectory(scene: DaylightScene, n_frames: int, rate_hz: float, rn
     n_targets = int(duration / 1.8) + 3
     targets = []
     for _ in range(n_targets):
-        pool = sunlit_points if (sunlit_points is not None and len(sunlit_points) and rng.random() < 0.4) \
+        pool = sunlit_points if (sunlit_points is not None and len(sunlit_points) and rng.random() < sunlit_share) \
             else surface_points
         if pool is None or not len(pool):
             targets.append(np.array([rng.uniform(0, W), rng.uniform(0, D), rng.uniform(0.3, 2.2)]))
