@@ -315,7 +315,8 @@ def test_tiny_recording_roundtrip_caching_and_determinism(tmp_path: Path) -> Non
         assert frame == "map" and 0.5 < T[2, 3] < 2.0
         first_img = bytes(msgs[0].data)
     assert meta["frames"] == 4 and meta["sequence"]["clouds"] is True
-    assert "sunlit_gaze_share" not in meta["params"]["spec"]  # added later: recordings made before keep their hash
+    # fields added later are left out at their defaults: recordings made before them keep their hash
+    assert "sunlit_gaze_share" not in meta["params"]["spec"] and "floor_in_gaze" not in meta["params"]["spec"]
     # a complete sequence is skipped
     mtime = (seq / "sequence.json").stat().st_mtime_ns
     generate_daylight_set(out, sequences=["DS1.T6"], **TINY)
@@ -353,6 +354,11 @@ def test_held_out_recordings_by_name_only(tmp_path: Path) -> None:
     assert not any(s.name.endswith(".H1") for s in SEQUENCES)  # the default set is Table I's twelve
     with pytest.raises(ValueError, match="sunlit_gaze_share"):
         replace(SEQUENCES[0], sunlit_gaze_share=1.5)
+    custom = replace(SEQUENCES[6], name="DS2.X1", floor_in_gaze=True)  # any spec, not only the named ones
+    [seq] = generate_daylight_set(tmp_path / "out", sequences=[custom], **TINY)
+    assert json.loads((seq / "sequence.json").read_text())["params"]["spec"]["floor_in_gaze"] is True
+    with pytest.raises(ValueError, match="unknown sequence"):
+        generate_daylight_set(tmp_path / "out", sequences=["DS9.T1"], **TINY)
 
 
 def _wall_with_box() -> ReflectanceMesh:

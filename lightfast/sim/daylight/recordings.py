@@ -36,7 +36,7 @@ import os
 import shutil
 import time
 from collections.abc import Sequence
-from dataclasses import asdict, replace
+from dataclasses import asdict, fields, replace
 from pathlib import Path
 from typing import Any
 
@@ -98,8 +98,9 @@ def _spec_params(spec: SequenceSpec) -> dict[str, Any]:
     """The spec's part of a recording's parameter hash; a field added later is left out at its default, so the
     recordings made before it keep their hash."""
     doc = asdict(spec)
-    if spec.sunlit_gaze_share == 0.4:
-        del doc["sunlit_gaze_share"]
+    for f in fields(SequenceSpec)[-2:]:  # sunlit_gaze_share, floor_in_gaze
+        if doc[f.name] == f.default:
+            del doc[f.name]
     return doc
 
 
@@ -213,7 +214,8 @@ def _generate_sequence(spec: SequenceSpec, scene: DaylightScene, renderer: Groun
     inside = vis & (pos[:, 2] > 0.05) & (pos[:, 2] < 2.3) & (pos[:, 1] > 0.0)
     rng_sel = np.random.default_rng([spec.seed, 2])
     surface = pos[inside][rng_sel.choice(int(inside.sum()), size=min(5000, int(inside.sum())), replace=False)]
-    lit = inside & (cache.sun_direct > 0.3)
+    floor = vis & (pos[:, 2] <= 0.05) & (pos[:, 1] > 0.0) if spec.floor_in_gaze else np.zeros_like(inside)
+    lit = (inside | floor) & (cache.sun_direct > 0.3)
     sunlit = pos[lit][rng_sel.choice(int(lit.sum()), size=min(2000, int(lit.sum())), replace=False)] \
         if lit.any() else None
     poses = hand_held_trajectory(scene, frames, rate_hz, np.random.default_rng([spec.seed, 3]),
@@ -335,7 +337,7 @@ def _scene_files(out: Path, scene: DaylightScene, *, progress: bool = False) -> 
 def generate_daylight_set(
     out_dir: str | os.PathLike[str],
     *,
-    sequences: Sequence[str] | None = None,
+    sequences: Sequence[str | SequenceSpec] | None = None,
     frames: int = 600,
     width: int = 320,
     height: int = 240,
@@ -349,15 +351,22 @@ def generate_daylight_set(
     force: bool = False,
 ) -> list[Path]:
     """Render the daylight sequences (default all 12 of :data:`SEQUENCES`; also the held-out ones of
-    :data:`HELDOUT_SEQUENCES` by name) into ``out_dir``; returns the sequence directories. Complete sequences with
-    the same parameters are skipped (``force`` re-renders them).
+    :data:`HELDOUT_SEQUENCES` by name, or any :class:`SequenceSpec`) into ``out_dir``; returns the sequence
+    directories. Complete sequences with the same parameters are skipped (``force`` re-renders them).
 
     ``resolution_m`` is the scene mesh resolution (default 2 cm); ``cache_settings`` overrides the per-scene
     :data:`DEFAULT_CACHE`; ``site`` overrides Freiburg. Small values (e.g. ``frames=3, width=64, height=48,
     resolution_m=0.15``) give tiny test recordings.
     """
-    names = list(sequences) if sequences else [s.name for s in SEQUENCES]
-    unknown = [n for n in names if n not in _BY_NAME]
+    specs: list[SequenceSpec] = []
+    unknown: list[str] = []
+    for s in sequences or SEQUENCES:
+        if isinstance(s, SequenceSpec):
+            specs.append(s)
+        elif s in _BY_NAME:
+            specs.append(_BY_NAME[s])
+        else:
+            unknown.append(s)
     if unknown:
         raise ValueError(f"unknown sequence(s) {unknown}; choose from {list(_BY_NAME)}")
     if frames < 1 or width < 8 or height < 8:
@@ -369,8 +378,7 @@ def generate_daylight_set(
     scenes: dict[str, tuple[DaylightScene, dict[str, Path]]] = {}
     renderers: dict[str, GroundTruthRenderer] = {}
     skipped_scenes: dict[str, float] = {}  # scenes of complete recordings: their files are still brought up to date
-    for name in names:
-        spec = _BY_NAME[name]
+    for spec in specs:
         res = resolution_m if resolution_m is not None else 0.02
         cfg = cache_settings or DEFAULT_CACHE[spec.scene]
         cfg = replace(cfg, seed=spec.seed)

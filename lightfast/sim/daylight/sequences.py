@@ -62,8 +62,9 @@ __all__ = [
 
 @dataclass(frozen=True)
 class SequenceSpec:
-    """One recording: scene, local start time (ISO, in the site's time zone), clouds or clear, seed, and the share
-    of the hand-held camera's gaze targets that lie in the sun (the rest: any visible surface)."""
+    """One recording: scene, local start time (ISO, in the site's time zone), clouds or clear, seed, the share of
+    the hand-held camera's gaze targets that lie in the sun (the rest: any visible surface) and whether sun patches
+    on the floor may be gaze targets (by default only surfaces 5 cm – 2.3 m above the floor are)."""
 
     name: str
     scene: str
@@ -72,6 +73,7 @@ class SequenceSpec:
     seed: int
     description: str
     sunlit_gaze_share: float = 0.4
+    floor_in_gaze: bool = False
 
     def __post_init__(self) -> None:
         if not 0.0 <= self.sunlit_gaze_share <= 1.0:
