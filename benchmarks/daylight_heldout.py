@@ -1,24 +1,24 @@
 """Table I on the held-out daylight recordings (issue 21, point 5): the regime check at the truth, then the five
 methods, as written down in benchmarks/results/HELDOUT.md before the recordings were rendered.
 
-Recordings: :data:`lightfast.sim.daylight.sequences.HELDOUT_SEQUENCES` (never used in development; do not tune on
-them). For each one, :func:`lightfast.eval.daylight_regime.regime_check` says from the truth (no method involved)
-whether it is in the paper's regime. Then ``lightfast eval daylight`` (:func:`~lightfast.eval.daylight.
-evaluate_daylight`: the paper's protocol, the node's code path) runs the five methods with two tracker
-configurations:
+Recordings: a round of :data:`lightfast.sim.daylight.sequences.HELDOUT_ROUNDS` (default the last; never used in
+development; do not tune on them). For each one, :func:`lightfast.eval.daylight_regime.regime_check` says from the
+truth (no method involved) whether it is in the paper's regime. Then ``lightfast eval daylight``
+(:func:`~lightfast.eval.daylight.evaluate_daylight`: the paper's protocol, the node's code path) runs the five methods
+with two tracker configurations:
 
 * ``node defaults``: the rgbd_tracker_node's defaults (the headline: what a user runs);
 * ``paper-like``: no f2f prior and every converged f2m correction used whatever its size (the paper names neither
   safeguard; benchmarks/daylight_ablation_causes.py showed both hide the methods' differences).
 
-    lightfast sim daylight SIM --sequences DS3.H1 DS3.H2 DS3.H3 DS2.H1
-    .venv/bin/python benchmarks/daylight_heldout.py SIM --maps MAPS --jobs 2
+    lightfast sim daylight SIM --sequences DS3.H4 DS3.H5 DS2.H2 DS2.H3
+    .venv/bin/python benchmarks/daylight_heldout.py SIM --maps MAPS --jobs 2 [--round 2]
 
 Writes ``OUT/heldout_summary.json`` (``methods``: per method ``rmse_cm`` and ``loss_pct`` pooled over the recordings
 with the node defaults; the same per configuration, per recording and over the in-regime recordings; the regime
 check per recording; the paper's Table I averages) and ``OUT/heldout_table.md`` (default OUT
-``benchmarks/results/eval_daylight/heldout``); keeps the evaluations in ``WORK/<configuration>/`` (resumable;
-default ``SIM/heldout``).
+``benchmarks/results/eval_daylight/heldout``; an earlier round: ``heldout_roundN_*``); keeps the evaluations in
+``WORK/<configuration>/`` (resumable; default ``SIM/heldout``).
 """
 from __future__ import annotations
 
@@ -67,7 +67,7 @@ def _cell(s: dict[str, float]) -> str:
 
 
 def _markdown(doc: dict[str, Any]) -> str:
-    lines = ["# Table I on the held-out daylight recordings (issue 21, point 5)", "",
+    lines = [f"# Table I on the held-out daylight recordings, round {doc['round']} (issue 21, point 5)", "",
              "Recordings, regime and configurations were written in benchmarks/results/HELDOUT.md before the "
              "recordings were rendered; nothing was tuned on them. Cells: RMSE cm over tracked frames / tracking loss "
              "% (lost frames); the paper's protocol (more than 10 cm or 10° off: lost, reset to the truth).",
@@ -97,7 +97,7 @@ def main(argv: list[str] | None = None) -> int:
     from lightfast.eval.daylight_regime import analyze_recording, regime_check
     from lightfast.eval.errors import DaylightEvalError
     from lightfast.io import json_finite, write_text_atomic
-    from lightfast.sim.daylight.sequences import HELDOUT_SEQUENCES
+    from lightfast.sim.daylight.sequences import HELDOUT_ROUNDS, HELDOUT_SEQUENCES
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("sim_dir", type=Path, help="directory holding the held-out recordings (`lightfast sim daylight`)")
@@ -105,8 +105,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--work", type=Path, default=None, help="per-configuration evaluations (default SIM_DIR/heldout)")
     ap.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results" / "eval_daylight" / "heldout")
     ap.add_argument("--jobs", type=int, default=1, help="parallel worker processes")
+    last = max(HELDOUT_ROUNDS)
+    ap.add_argument("--round", type=int, default=last, choices=sorted(HELDOUT_ROUNDS),
+                    help=f"held-out round (default {last}, the current one)")
     args = ap.parse_args(argv)
-    names = [s.name for s in HELDOUT_SEQUENCES]
+    names = list(HELDOUT_ROUNDS[args.round])
     missing = [n for n in names if not (args.sim_dir / n / "sequence.json").is_file()]
     if missing:
         print(f"error: held-out recordings missing in {args.sim_dir}: {', '.join(missing)} (make them with "
@@ -132,14 +135,15 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     command = "python benchmarks/daylight_heldout.py " + " ".join(
         shown_path(a) if a.startswith("/") else a for a in (sys.argv[1:] if argv is None else argv))
-    doc = {"command": command, "seconds": time.perf_counter() - t0, "recordings": names,
-           "specs": {s.name: asdict(s) for s in HELDOUT_SEQUENCES},
+    doc = {"command": command, "round": args.round, "seconds": time.perf_counter() - t0, "recordings": names,
+           "specs": {s.name: asdict(s) for s in HELDOUT_SEQUENCES if s.name in names},
            "methods": configurations["node defaults"]["methods"],
            "regime": regime, "configurations": configurations, "paper_average": PAPER_AVERAGE}
     args.out.mkdir(parents=True, exist_ok=True)
     text = _markdown(doc)
-    write_text_atomic(args.out / "heldout_table.md", text)
-    write_text_atomic(args.out / "heldout_summary.json", json.dumps(json_finite(doc), indent=1) + "\n")
+    stem = "heldout" if args.round == last else f"heldout_round{args.round}"
+    write_text_atomic(args.out / f"{stem}_table.md", text)
+    write_text_atomic(args.out / f"{stem}_summary.json", json.dumps(json_finite(doc), indent=1) + "\n")
     print(text, end="")
     return 0
 

@@ -85,7 +85,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                     "truth).")
     p.add_argument("out", type=Path, help="output directory")
     p.add_argument("--sequences", nargs="+", metavar="NAME", choices=[s.name for s in SEQUENCES + HELDOUT_SEQUENCES],
-                   help="sequences to render (default: the 12 of Table I; the held-out DS3.H1-H3 and DS2.H1 of "
+                   help="sequences to render (default: the 12 of Table I; the held-out DS3.H1-H5, DS2.H1-H3 of "
                         "issue 21 by name only)")
     p.add_argument("--frames", type=int, default=600, help="frames per sequence (30 Hz; default 600)")
     p.add_argument("--size", type=image_size("320x240"), default=(320, 240), help="image size WxH (default 320x240)")
