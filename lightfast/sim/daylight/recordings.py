@@ -98,9 +98,10 @@ def _spec_params(spec: SequenceSpec) -> dict[str, Any]:
     """The spec's part of a recording's parameter hash; a field added later is left out at its default, so the
     recordings made before it keep their hash."""
     doc = asdict(spec)
-    for f in fields(SequenceSpec)[-2:]:  # sunlit_gaze_share, floor_in_gaze
-        if doc[f.name] == f.default:
-            del doc[f.name]
+    defaults = {f.name: f.default for f in fields(SequenceSpec)}
+    for name in ("sunlit_gaze_share", "floor_in_gaze"):
+        if doc[name] == defaults[name]:
+            del doc[name]
     return doc
 
 
