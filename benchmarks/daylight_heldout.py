@@ -33,21 +33,20 @@ from typing import Any
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from daylight_ablation_causes import VARIANTS, _slug  # noqa: E402  (the script's folder is on sys.path)
+
 from lightfast.eval.daylight import METHODS, SequenceRun, evaluate_daylight, pooled  # noqa: E402
 from lightfast.tracking.pipeline import TrackerConfig  # noqa: E402
 
+#: The headline and the causes benchmark's variant closest to the paper (no f2f prior, f2m's size check off).
 CONFIGURATIONS: dict[str, TrackerConfig] = {
-    "node defaults": TrackerConfig(),
-    "paper-like": TrackerConfig(pose_prior_weight=0.0, max_f2m_correction_m=1e3, max_f2m_correction_deg=180.0),
+    "node defaults": VARIANTS["as recorded"][0],
+    "paper-like": VARIANTS["no f2f prior + f2m unchecked"][0],
 }
 #: The paper's Table I, average row (RMSE cm over tracked frames, loss %); E_lin: §IV-D's text (loss only).
 PAPER_AVERAGE = {"proposed": {"rmse_cm": 3.61, "loss_pct": 2.16}, "proposed-lin": {"loss_pct": 10.0},
                  "refl-f2m": {"rmse_cm": 4.99, "loss_pct": 31.98}, "depth-only": {"rmse_cm": 4.53, "loss_pct": 11.89},
                  "no-color-f2m": {"rmse_cm": 4.53, "loss_pct": 11.90}}
-
-
-def _slug(name: str) -> str:
-    return "".join(c if c.isalnum() else "_" for c in name).strip("_")
 
 
 def _results(runs: list[SequenceRun], in_regime: set[str]) -> dict[str, Any]:
