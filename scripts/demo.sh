@@ -43,7 +43,7 @@ rate=${RATE:-1}
 plays=${PLAYS:-1}
 sensor=${SENSOR_RELIABILITY:-reliable}
 read -r -a play_args <<<"${PLAY_ARGS:-}"
-export ROS_DOMAIN_ID=${ROS_DOMAIN_ID:-$(( (RANDOM % 200) + 20 ))}
+export ROS_DOMAIN_ID=${ROS_DOMAIN_ID:-$(( (RANDOM % 82) + 20 ))}
 # one BLAS/OpenMP thread per process: five processes share 2 cores, and idle BLAS workers spin on them
 export OPENBLAS_NUM_THREADS=${OPENBLAS_NUM_THREADS:-1} OMP_NUM_THREADS=${OMP_NUM_THREADS:-1}
 sim="$out/daylight-sim-$size-$frames-$resolution"

@@ -41,7 +41,7 @@ eta=$(decimal "${ETA:-1e-3}")
 timeout_s=${TIMEOUT:-300}
 seed=${SEED:-0}
 sensor=${SENSOR_RELIABILITY:-reliable}  # lossless; best_effort is the default of racr_node for live VSEs
-export ROS_DOMAIN_ID=${ROS_DOMAIN_ID:-$(( (RANDOM % 200) + 20 ))}
+export ROS_DOMAIN_ID=${ROS_DOMAIN_ID:-$(( (RANDOM % 82) + 20 ))}
 mkdir -p "$out"
 out=$(cd "$out" && pwd)
 

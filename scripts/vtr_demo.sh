@@ -27,7 +27,7 @@ out=${LIGHTFAST_OUT:-$root/out}
 mode=${MODE:-fused}
 rate=${RATE:-1}
 sensor=${SENSOR_RELIABILITY:-reliable}  # a replay loses nothing; a live camera driver is best_effort
-export ROS_DOMAIN_ID=${ROS_DOMAIN_ID:-$(( (RANDOM % 200) + 20 ))}
+export ROS_DOMAIN_ID=${ROS_DOMAIN_ID:-$(( (RANDOM % 82) + 20 ))}
 mkdir -p "$out"
 out=$(cd "$out" && pwd)
 

@@ -27,10 +27,14 @@ def child_env(domain_id: int, **extra: str) -> dict[str, str]:
 @contextmanager
 def bounded_process(
     cmd: Sequence[str], *, timeout_s: float, env: dict[str, str] | None = None, cwd: Path | None = None,
-    stdout: int | None = subprocess.PIPE, stderr: int | None = subprocess.PIPE, kill_after_s: float = 5.0,
+    stdout: int | None = subprocess.PIPE, stderr: int | None = subprocess.PIPE, kill_after_s: float = 20.0,
 ) -> Iterator[subprocess.Popen[str]]:
     """Start ``cmd`` under ``timeout -k`` in its own process group; whatever happens, it cannot outlive
-    ``timeout_s + kill_after_s``, and leaving the block kills the whole group."""
+    ``timeout_s + kill_after_s``, and leaving the block kills the whole group.
+
+    ``kill_after_s`` is also the grace period of a signal sent to the process (``proc.send_signal`` or
+    ``os.killpg``): timeout(1) forwards SIGINT/SIGTERM and SIGKILLs the group ``kill_after_s`` later, so a clean
+    shutdown (a map saved, a bag closed, a demo's clean-up) must fit in it on a loaded machine too."""
     wrapped = ["timeout", "-k", f"{kill_after_s:g}", f"{timeout_s:g}", *cmd]
     proc = subprocess.Popen(wrapped, env=env, cwd=cwd, stdout=stdout, stderr=stderr, text=True,
                             start_new_session=True)
@@ -49,7 +53,7 @@ def run_bounded(cmd: Sequence[str], *, timeout_s: float, env: dict[str, str] | N
                 input_text: str | None = None) -> subprocess.CompletedProcess[str]:
     """Run ``cmd`` to completion under ``timeout -k``; returns its result (stdout/stderr as text)."""
     with bounded_process(cmd, timeout_s=timeout_s, env=env) as proc:
-        out, err = proc.communicate(input=input_text, timeout=timeout_s + 15)
+        out, err = proc.communicate(input=input_text, timeout=timeout_s + 30)
     return subprocess.CompletedProcess(proc.args, proc.returncode, out, err)
 
 

@@ -3,7 +3,10 @@
 Two processes on the same ``ROS_DOMAIN_ID`` see each other's topics, even with discovery limited to localhost.
 :func:`reserve_domain_id` takes an exclusive ``flock`` on ``<lock_dir>/domain-<id>.lock`` for an id in
 ``[first, last]``; the lock lives as long as the returned :class:`DomainLease` (or the process), so concurrent test
-runs always get distinct ids. Fast DDS accepts ids up to 232 with its default port mapping.
+runs always get distinct ids. Fast DDS accepts ids up to 232 with its default port mapping, but ids from 102 on map
+to UDP ports inside Linux's ephemeral range (32768–60999), where any socket may already hold them, or (215–232) leave
+room for few participants; ids are therefore handed out from ROS 2's safe range 1–101 ("About Domain ID",
+docs.ros.org), as ROS's own ``domain_coordinator`` does.
 """
 from __future__ import annotations
 
@@ -17,6 +20,8 @@ from pathlib import Path
 from lightfast.ros.errors import DomainExhaustedError
 
 MAX_DOMAIN_ID = 232
+#: The highest id whose ports stay below Linux's ephemeral range (ROS 2 docs: "choose a domain ID between 0 and 101").
+MAX_SAFE_DOMAIN_ID = 101
 
 
 @dataclass
@@ -42,7 +47,7 @@ def default_lock_dir() -> Path:
     return Path(tempfile.gettempdir()) / "lightfast-ros-domains"
 
 
-def reserve_domain_id(*, first: int = 1, last: int = MAX_DOMAIN_ID, lock_dir: Path | None = None) -> DomainLease:
+def reserve_domain_id(*, first: int = 1, last: int = MAX_SAFE_DOMAIN_ID, lock_dir: Path | None = None) -> DomainLease:
     """Reserve a free domain id in ``[first, last]``, trying them in random order."""
     if not 0 <= first <= last <= MAX_DOMAIN_ID:
         raise ValueError(f"domain range must satisfy 0 <= first <= last <= {MAX_DOMAIN_ID}, got [{first}, {last}]")
