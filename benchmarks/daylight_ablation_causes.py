@@ -156,10 +156,9 @@ def main(argv: list[str] | None = None) -> int:
         results[v] = _summary(runs)
         print(f"{v}: " + ", ".join(f"{m} {s['loss_pct']:.2f} %" for m, s in results[v].items()), flush=True)
     motion = _motion(args.sim_dir, sequences)
-    from lightfast.data.shared import shown_path
+    from lightfast.data.shared import shown_command
 
-    command = "python benchmarks/daylight_ablation_causes.py " + " ".join(
-        shown_path(a) if a.startswith("/") else a for a in (sys.argv[1:] if argv is None else argv))
+    command = shown_command("benchmarks/daylight_ablation_causes.py", sys.argv[1:] if argv is None else argv)
     text = _markdown(results, motion, sequences, command, time.perf_counter() - t0)
     args.out.mkdir(parents=True, exist_ok=True)
     write_text_atomic(args.out / "causes.md", text)

@@ -159,7 +159,7 @@ def _markdown(summary: dict[str, dict[str, dict[str, float]]], args: argparse.Na
 
 
 def main(argv: list[str] | None = None) -> int:
-    from lightfast.data.shared import shown_path
+    from lightfast.data.shared import shown_command
     from lightfast.io import json_finite, write_text_atomic
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -190,8 +190,7 @@ def main(argv: list[str] | None = None) -> int:
                       max_frames=args.max_frames)
         print(f"{seq.name}: {len(rows)} alignments so far", flush=True)
     summary = summarize(rows)
-    command = "python benchmarks/daylight_f2m_terms.py " + " ".join(
-        shown_path(a) if a.startswith("/") else a for a in (sys.argv[1:] if argv is None else argv))
+    command = shown_command("benchmarks/daylight_f2m_terms.py", sys.argv[1:] if argv is None else argv)
     text = _markdown(summary, args, [s.name for s in seqs], command, time.perf_counter() - t0)
     args.out.mkdir(parents=True, exist_ok=True)
     stem = f"f2m_terms_{args.shift_cm:g}cm_{args.turn_deg:g}deg"

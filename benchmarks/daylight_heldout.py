@@ -92,7 +92,7 @@ def _markdown(doc: dict[str, Any]) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from lightfast.data.shared import shown_path
+    from lightfast.data.shared import shown_command
     from lightfast.eval.daylight_regime import analyze_recording, regime_check
     from lightfast.eval.errors import DaylightEvalError
     from lightfast.io import json_finite, write_text_atomic
@@ -132,8 +132,7 @@ def main(argv: list[str] | None = None) -> int:
     except DaylightEvalError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    command = "python benchmarks/daylight_heldout.py " + " ".join(
-        shown_path(a) if a.startswith("/") else a for a in (sys.argv[1:] if argv is None else argv))
+    command = shown_command("benchmarks/daylight_heldout.py", sys.argv[1:] if argv is None else argv)
     doc = {"command": command, "round": args.round, "seconds": time.perf_counter() - t0, "recordings": names,
            "specs": {s.name: asdict(s) for s in HELDOUT_SEQUENCES if s.name in names},
            "methods": configurations["node defaults"]["methods"],

@@ -36,7 +36,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from lightfast.data.shared import shown_path  # noqa: E402
+from lightfast.data.shared import shown_command  # noqa: E402
 from lightfast.daylight.lighting_map import LightingMapConfig, prepare_lighting_map  # noqa: E402
 from lightfast.daylight.mesh import ReflectanceMesh, load_ply  # noqa: E402
 from lightfast.daylight.sun import Site, sun_position  # noqa: E402
@@ -180,8 +180,7 @@ def main() -> int:
     p.add_argument("--save-points", type=Path, help="folder for one npz per room: points, ours, Radiance's")
     p.add_argument("--out", type=Path, help="output stem (default benchmarks/results/radiance_<rooms or mesh name>)")
     args = p.parse_args()
-    args.command = "python benchmarks/radiance_heldout.py " + " ".join(
-        shown_path(a) if a.startswith("/") else a for a in sys.argv[1:])
+    args.command = shown_command("benchmarks/radiance_heldout.py", sys.argv[1:])
     if (args.rooms is None) == (args.mesh is None):
         p.error("give either --rooms or --mesh")
     results: dict[str, dict[str, Any]] = {}

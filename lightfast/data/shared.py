@@ -14,7 +14,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-__all__ = ["REPO_ROOT", "SHARED_ENV", "shared_data_dir", "shared_root", "shown_path"]
+__all__ = ["REPO_ROOT", "SHARED_ENV", "shared_data_dir", "shared_root", "shown_command", "shown_path"]
 
 #: The checkout this package runs from (``lightfast/`` is at its top level).
 REPO_ROOT = Path(__file__).resolve().parents[2]
@@ -53,3 +53,9 @@ def shown_path(path: str | os.PathLike[str]) -> str:
     if (rel := _relative(p, Path.home().resolve())) is not None:
         return f"~/{rel}".rstrip("/")
     return str(path)
+
+
+def shown_command(script: str, argv: list[str]) -> str:
+    """``python <script> <argv>`` as a report shows the command that made it: absolute paths among the arguments
+    through :func:`shown_path`."""
+    return " ".join(["python", script, *(shown_path(a) if a.startswith("/") else a for a in argv)])

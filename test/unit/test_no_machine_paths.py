@@ -60,7 +60,7 @@ def test_no_tracked_file_names_a_machine_path() -> None:
 
 
 def test_the_shared_folder_and_how_reports_show_paths(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
-    from lightfast.data.shared import REPO_ROOT, SHARED_ENV, shared_data_dir, shared_root, shown_path
+    from lightfast.data.shared import REPO_ROOT, SHARED_ENV, shared_data_dir, shared_root, shown_command, shown_path
 
     monkeypatch.delenv(SHARED_ENV, raising=False)
     assert shared_root() == REPO_ROOT.parent / "shared"
@@ -71,3 +71,4 @@ def test_the_shared_folder_and_how_reports_show_paths(monkeypatch: pytest.Monkey
     assert shown_path(shared_data_dir("x")) == "$LIGHTFAST_SHARED/data/x"
     monkeypatch.setenv("HOME", str(tmp_path))
     assert shown_path(tmp_path / ".cache" / "lightfast" / "sim") == "~/.cache/lightfast/sim"
+    assert shown_command("benchmarks/b.py", [str(tmp_path / "sim"), "--jobs", "2"]) == "python benchmarks/b.py ~/sim --jobs 2"
