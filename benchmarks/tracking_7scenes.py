@@ -17,9 +17,10 @@ the same run:
   ``depth_huber_delta``, ``depth_outlier_trunc``, ``depth_max`` scaled by ``s``, translation divided by ``s``), which
   turns its cost into ``E_I + 10 E_D`` (see docs/daylight.md, "Direct RGB-D tracking").
 
-The same four main runs again on colour images registered to depth by the shift
-:func:`lightfast.data.sevenscenes.colour_offset` estimates from the images alone (no ground truth): the Kinect
-v1's colour and depth cameras are not registered in 7-Scenes (PROVENANCE.md).
+The same four main runs again on colour images registered to depth by the similarity (scale about the centre and
+shift) :func:`lightfast.data.sevenscenes.colour_registration` estimates from the images alone (no ground truth): the
+Kinect v1's colour and depth cameras are not registered in 7-Scenes (PROVENANCE.md), and the colour camera's focal
+length is about 0.9 times the depth camera's, whose K the data set ships.
 
 Each chained trajectory is compared with the ground truth by ATE RMSE after a rigid Umeyama alignment
 (:func:`lightfast.tracking.ate_rmse`), by the mean ATE of 100-frame windows, by the drift over 1 s (RMSE of the
@@ -29,7 +30,8 @@ time per frame includes the image pyramid / tensor preparation; lightfast's alig
 
 Sub-sequences: the frames cut into consecutive stretches of ``--subsequence`` frames (default 150; a shorter rest
 is dropped), each tracked on its own by Open3D's two APIs and lightfast's f2f at both resolutions; the table gives
-each stretch's ATE and their mean, the verdict whether lightfast's f2f is ahead of both Open3D APIs on that mean.
+each stretch's ATE and their mean, the verdict whether lightfast's f2f is ahead of both Open3D APIs on that mean;
+on the raw frames and again on the registered colour (every method gets the same frames).
 
 Prints markdown and writes it atomically to ``--output`` (default ``benchmarks/results/tracking_7scenes.md``), the
 sub-sequence numbers beside it as JSON (same name, ``.json``).
@@ -40,6 +42,7 @@ Usage: ``.venv/bin/python benchmarks/tracking_7scenes.py [--data DIR] [--first N
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import functools
 import itertools
 import json
@@ -59,7 +62,7 @@ from numpy.typing import NDArray
 
 from lightfast.camera import PinholeCamera
 from lightfast.data.errors import DatasetError
-from lightfast.data.sevenscenes import SevenScenes, colour_offset, shift_colour
+from lightfast.data.sevenscenes import SevenScenes, colour_registration, register_colour
 from lightfast.data.shared import shared_data_dir, shown_path
 from lightfast.io import write_text_atomic
 from lightfast.tracking import TrackingConfig, ate_rmse, track_sequence
@@ -88,7 +91,8 @@ class Track:
 @dataclass(frozen=True)
 class Sequence7:
     """Frames of one 7-Scenes folder: ``numbers`` (file numbers), full-size and 320×240 frames (rgb, depth m),
-    ground truth ``T_world_cam``, both cameras, and every 20th frame's raw (rgb, depth mm) for the colour offset."""
+    ground truth ``T_world_cam``, both cameras, and every 20th frame's raw (rgb, depth mm) for the colour
+    registration."""
 
     data: Path
     numbers: list[int]
@@ -116,6 +120,16 @@ def load_sequence(data: Path, first: int | None = None, last: int | None = None)
     small, small_cam = _resize(frames, ds.camera)
     return Sequence7(data, numbers, frames, small, np.stack([f.T_world_cam for f in raw]), ds.camera, small_cam,
                      [(f.rgb, f.depth_mm) for f in raw[::20]], ds.intrinsics_file)
+
+
+def registered(seq: Sequence7) -> tuple[Sequence7, str]:
+    """``seq`` with its colour registered to depth by the similarity estimated from every 20th frame's images (no
+    poses; :func:`lightfast.data.sevenscenes.colour_registration`), and a label saying which."""
+    reg = colour_registration(seq.raw_sparse, seq.cam)
+    frames: Frames = [(register_colour(rgb, reg, seq.cam), depth) for rgb, depth in seq.frames]
+    small, _ = _resize(frames, seq.cam)
+    return (dataclasses.replace(seq, frames=frames, small=small),
+            f"colour registered (scale {reg.scale:.3f}, {reg.dx_px:+.0f}, {reg.dy_px:+.0f} px)")
 
 
 def _o3d_track(frames: Frames, cam: PinholeCamera, *, w_G: float | None, constant_velocity: bool = True) -> Track:
@@ -304,7 +318,7 @@ def evaluate_subsequences(seq: Sequence7, length: int, trackers: list[SubTracker
             "stretches": [[seq.numbers[ix.start], seq.numbers[ix.stop - 1]] for ix in stretches], "rows": rows}
 
 
-def _subsequence_lines(sub: dict[str, Any]) -> list[str]:
+def _subsequence_lines(sub: dict[str, Any], colour: str) -> list[str]:
     heads = [f"{a}–{b}" for a, b in sub["stretches"]]
     verdicts = [f"{r['method']} at {r['resolution']}: mean {r['mean_ate_cm']:.2f} cm, "
                 + ("ahead of both Open3D APIs" if r["ahead_of_both"] else "**not** ahead of both Open3D APIs")
@@ -315,7 +329,7 @@ def _subsequence_lines(sub: dict[str, Any]) -> list[str]:
 
     return [
         "",
-        f"## Sub-sequences of {sub['length']} frames",
+        f"## Sub-sequences of {sub['length']} frames, {colour}",
         "",
         f"Frames {sub['frames'][0]}–{sub['frames'][1]} cut into {len(heads)} consecutive "
         f"stretch{'es' if len(heads) > 1 else ''} of {sub['length']} frames (a shorter rest left out), each tracked "
@@ -355,6 +369,7 @@ def main(argv: list[str] | None = None) -> int:
     seq = load_sequence(args.data, args.first, args.last)
     frames, small_frames, cam, small_cam, gt = seq.frames, seq.small, seq.cam, seq.small_cam, seq.gt
     full, half = _size(cam), _size(small_cam)
+    reg_seq, reg_tag = registered(seq)
     for scale in (1.0, 0.5):  # numba compiles on first use (and after a move of the source): not a frame's time
         track_sequence(frames[:2], cam, config=TrackingConfig(resolution_scale=scale))
 
@@ -381,12 +396,8 @@ def main(argv: list[str] | None = None) -> int:
          lambda: _lf_track(frames, cam, TrackingConfig(), constant_velocity=False)),
     ] if args.main else []
     if args.main:
-        # the Kinect v1's colour and depth cameras are not registered: the same runs on colour shifted by the offset
-        # estimated from the images alone (depth edges vs colour gradients, no poses; lightfast.data.sevenscenes)
-        offset = colour_offset(seq.raw_sparse)
-        reg = [(shift_colour(rgb, offset), depth) for rgb, depth in frames]
-        small_reg, _ = _resize(reg, cam)
-        tag = f"colour registered ({offset[0]:+d}, {offset[1]:+d}) px"
+        # the Kinect v1's colour and depth cameras are not registered: the same runs on registered colour
+        reg, small_reg, tag = reg_seq.frames, reg_seq.small, reg_tag
         runs += [
             (f"Open3D hybrid (defaults), {tag}", full, lambda: _o3d_track(reg, cam, w_G=None)),
             (f"Open3D hybrid (defaults), {tag}", half, lambda: _o3d_track(small_reg, small_cam, w_G=None)),
@@ -436,6 +447,8 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{name:45s} {res:8s} ATE over {len(values)} orderings: mean {np.mean(values):5.2f}, "
                   f"median {np.median(values):5.2f} cm", flush=True)
     sub = evaluate_subsequences(seq, args.subsequence) if args.subsequence else None
+    # every method on the same registered frames
+    sub_reg = evaluate_subsequences(reg_seq, args.subsequence) | {"colour": reg_tag} if args.subsequence else {}
 
     numbers = seq.numbers
     gaps = sum(b - a > 1 for a, b in itertools.pairwise(numbers))
@@ -489,7 +502,8 @@ def main(argv: list[str] | None = None) -> int:
               + f" | **{np.mean(v):.2f}** | {np.median(v):.2f} |" for n, r, v in order_rows],
         ]
     if sub is not None:
-        lines += _subsequence_lines(sub)
+        lines += _subsequence_lines(sub, "raw frames")
+        lines += _subsequence_lines(sub_reg, sub_reg["colour"])
     lines += [
         "",
         f"Generated {datetime.now(UTC).isoformat(timespec='seconds')} by `benchmarks/tracking_7scenes.py` "
@@ -501,7 +515,8 @@ def main(argv: list[str] | None = None) -> int:
     print(report)
     write_text_atomic(args.output, report)
     if sub is not None:
-        summary = {"data": shown_path(seq.data), "first": numbers[0], "last": numbers[-1], "subsequences": sub}
+        summary = {"data": shown_path(seq.data), "first": numbers[0], "last": numbers[-1], "subsequences": sub,
+                   "subsequences_registered": sub_reg}
         write_text_atomic(args.output.with_suffix(".json"), json.dumps(summary, indent=1, ensure_ascii=False) + "\n")
     return 0
 

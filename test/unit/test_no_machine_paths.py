@@ -71,4 +71,5 @@ def test_the_shared_folder_and_how_reports_show_paths(monkeypatch: pytest.Monkey
     assert shown_path(shared_data_dir("x")) == "$LIGHTFAST_SHARED/data/x"
     monkeypatch.setenv("HOME", str(tmp_path))
     assert shown_path(tmp_path / ".cache" / "lightfast" / "sim") == "~/.cache/lightfast/sim"
-    assert shown_command("benchmarks/b.py", [str(tmp_path / "sim"), "--jobs", "2"]) == "python benchmarks/b.py ~/sim --jobs 2"
+    command = shown_command("benchmarks/b.py", [str(tmp_path / "sim"), "--jobs", "2"])
+    assert command == "python benchmarks/b.py ~/sim --jobs 2"

@@ -6,16 +6,18 @@ import numpy as np
 import pytest
 
 from lightfast.bag import open_bag
+from lightfast.camera import PinholeCamera
 from lightfast.data.errors import DatasetError
 from lightfast.data.sevenscenes import (
     COLOR_INFO_TOPIC,
     COLOR_TOPIC,
     DEPTH_TOPIC,
     GT_POSE_TOPIC,
+    ColourRegistration,
     SevenScenes,
-    colour_offset,
+    colour_registration,
     convert_7scenes,
-    shift_colour,
+    register_colour,
 )
 from lightfast.geometry import is_rotation
 from lightfast.ros.convert import camera_from_camera_info, image_to_numpy, pose_stamped_to_matrix, stamp_to_ns
@@ -90,20 +92,46 @@ def test_bad_input(tmp_path: Path, sevenscenes_dir: Path) -> None:
     assert not (tmp_path / "out").exists()
 
 
-def test_colour_offset_recovers_a_known_misregistration() -> None:
-    """Boxes in front of a wall: depth edges at the boxes' outlines; the colour image shows the same boxes moved by
-    (6, -4) px (plus texture noise); the estimated registration moves them back."""
+def test_colour_registration_recovers_a_known_similarity() -> None:
+    """Boxes in front of a wall: depth edges at the boxes' outlines; the colour image is what a camera with 0.9 times
+    the depth camera's focal length, shifted by (-8, +3) px, sees (plus texture noise): the estimate recovers it,
+    and registering the colour with it puts the boxes' colour back on their depth."""
     rng = np.random.default_rng(5)
-    frames = []
+    camera = PinholeCamera(320, 240, 292.5, 292.5, 160.0, 120.0)
+    truth = ColourRegistration(0.9, -8.0, 3.0)
+    frames, boxes = [], []
     for _ in range(4):
         depth = np.full((240, 320), 3000, np.uint16)
         colour = np.full((240, 320, 3), 90, np.uint8)
-        for _ in range(5):
-            x, y = rng.integers(50, 230), rng.integers(50, 150)
+        for _ in range(6):
+            x, y = rng.integers(40, 250), rng.integers(40, 170)
             w, h = rng.integers(15, 40, size=2)
             depth[y:y + h, x:x + w] = 1500
             colour[y:y + h, x:x + w] = rng.integers(150, 250, 3)
         colour = np.clip(colour + rng.normal(0, 4, colour.shape), 0, 255).astype(np.uint8)
-        frames.append((shift_colour(colour, (6, -4)), depth))
-    assert colour_offset(frames, search_px=12, step_px=2) == (-6, 4)
-    assert colour_offset(frames, search_px=12, step_px=1) == (-6, 4)
+        # the colour camera's image: colour pixel truth(u, v) shows depth pixel (u, v)
+        seen = cv2.warpAffine(colour, truth.matrix(camera), (320, 240), flags=cv2.INTER_NEAREST,
+                              borderMode=cv2.BORDER_REPLICATE)
+        frames.append((seen, depth))
+        boxes.append(colour)
+    est = colour_registration(frames, camera)
+    assert abs(est.scale - 0.9) <= 0.0051 and abs(est.dx_px + 8.0) <= 1.0 and abs(est.dy_px - 3.0) <= 1.0, est
+    for (seen, _), colour in zip(frames, boxes, strict=True):
+        inner = np.s_[30:-30, 30:-30]
+        back = register_colour(seen, est, camera)[inner].astype(int)
+        moved, unregistered = np.abs(back - colour[inner]).mean(), np.abs(seen[inner] - colour[inner]).mean()
+        assert moved < 0.25 * unregistered, (moved, unregistered)
+    with pytest.raises(DatasetError, match="at least one frame"):
+        colour_registration([], camera)
+
+
+def test_colour_registration_of_the_real_frames_is_one_similarity(sevenscenes_dir: Path) -> None:
+    """On the real Kinect v1 frames, both halves of the sequence (every 15th frame, estimated separately) give the
+    same scale, near the colour / depth focal-length ratio of the OpenNI defaults (525 / 585 = 0.897), and shifts
+    within 4 px of each other (the shift stands for the baseline at the scene's depth)."""
+    ds = SevenScenes(sevenscenes_dir)
+    halves = [ds.indices[:150:15], ds.indices[150::15]]
+    est = [colour_registration([(f.rgb, f.depth_mm) for f in map(ds.frame, half)], ds.camera) for half in halves]
+    assert all(abs(e.scale - 0.897) < 0.02 for e in est), est
+    assert abs(est[0].scale - est[1].scale) <= 0.01 and abs(est[0].dx_px - est[1].dx_px) <= 4.0, est
+    assert abs(est[0].dy_px - est[1].dy_px) <= 4.0, est
