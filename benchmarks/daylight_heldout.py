@@ -96,7 +96,7 @@ def main(argv: list[str] | None = None) -> int:
     from lightfast.eval.daylight_regime import analyze_recording, regime_check
     from lightfast.eval.errors import DaylightEvalError
     from lightfast.io import json_finite, write_text_atomic
-    from lightfast.sim.daylight.sequences import HELDOUT_ROUNDS, HELDOUT_SEQUENCES
+    from lightfast.sim.daylight.sequences import HELDOUT_ROUNDS
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("sim_dir", type=Path, help="directory holding the held-out recordings (`lightfast sim daylight`)")
@@ -108,7 +108,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--round", type=int, default=last, choices=sorted(HELDOUT_ROUNDS),
                     help=f"held-out round (default {last}, the current one)")
     args = ap.parse_args(argv)
-    names = list(HELDOUT_ROUNDS[args.round])
+    names = [s.name for s in HELDOUT_ROUNDS[args.round]]
     missing = [n for n in names if not (args.sim_dir / n / "sequence.json").is_file()]
     if missing:
         print(f"error: held-out recordings missing in {args.sim_dir}: {', '.join(missing)} (make them with "
@@ -134,7 +134,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     command = shown_command("benchmarks/daylight_heldout.py", sys.argv[1:] if argv is None else argv)
     doc = {"command": command, "round": args.round, "seconds": time.perf_counter() - t0, "recordings": names,
-           "specs": {s.name: asdict(s) for s in HELDOUT_SEQUENCES if s.name in names},
+           "specs": {s.name: asdict(s) for s in HELDOUT_ROUNDS[args.round]},
            "methods": configurations["node defaults"]["methods"],
            "regime": regime, "configurations": configurations, "paper_average": PAPER_AVERAGE}
     args.out.mkdir(parents=True, exist_ok=True)

@@ -369,7 +369,8 @@ def main(argv: list[str] | None = None) -> int:
     seq = load_sequence(args.data, args.first, args.last)
     frames, small_frames, cam, small_cam, gt = seq.frames, seq.small, seq.cam, seq.small_cam, seq.gt
     full, half = _size(cam), _size(small_cam)
-    reg_seq, reg_tag = registered(seq)
+    # the registration (8 s) only for the tables that use it
+    reg_seq, reg_tag = registered(seq) if args.main or args.subsequence else (seq, "raw frames")
     for scale in (1.0, 0.5):  # numba compiles on first use (and after a move of the source): not a frame's time
         track_sequence(frames[:2], cam, config=TrackingConfig(resolution_scale=scale))
 
