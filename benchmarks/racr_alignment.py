@@ -6,8 +6,9 @@ Clouds (real geometry, read in place from ``../shared/data/3dmatch_redkitchen_pa
 ``--points`` points each by adding points between every point and its 6 nearest neighbours:
 
 * **pair** — ``src.npy`` (current, scaled by 1/σ) against ``ref.npy`` (reference), ~45 % overlap. Accuracy is
-  reported against ``gt.npy`` and against the pair's own optimum (Open3D's scaled point-to-point ICP run from
-  ``gt.npy``); ``gt.npy`` is ~1° / 10 cm / 2.5 % from that optimum (``test/unit/racr/test_fast_alignment.py``).
+  reported against ``gt.npy`` and against the pair's own optimum (the minimum of the objective of Open3D's scaled
+  point-to-point ICP, reached from ``gt.npy``); ``gt.npy`` is ~1° / 10 cm / 2 % from that optimum
+  (``test/unit/racr/test_fast_alignment.py``).
 * **surface** — ``ref.npy`` split along its principal axis into a reference part and an overlapping current part
   (~55 % shared, current re-sampled at other points with 2 mm noise), moved by a known similarity: exact truth.
 
@@ -61,6 +62,7 @@ from test.unit.racr.test_fast_alignment import (  # noqa: E402  (the tests' cold
     _open3d_scaled_icp,
     _perturbed_start,
     _seeded_start,
+    descend_truncated_cost,
 )
 
 DATA = shared_data_dir("3dmatch_redkitchen_pair")  # $LIGHTFAST_SHARED/data or ../shared/data, read in place
@@ -120,7 +122,8 @@ def held_out() -> dict:
     origin, ~2.3 m from the clouds), scale, and the displacement of the current cloud's centroid."""
     src, ref, gt = np.load(DATA / "src.npy"), np.load(DATA / "ref.npy"), np.load(DATA / "gt.npy")
     T_gt = rigid(project_to_so3(gt[:3, :3]), gt[:3, 3])
-    T_opt, s_opt = _open3d_scaled_icp(src, ref, T_gt, 1.0, OPTIMUM_DISTANCE_M)
+    T_icp, s_icp = _open3d_scaled_icp(src, ref, T_gt, 1.0, OPTIMUM_DISTANCE_M)
+    T_opt, s_opt = descend_truncated_cost(src, ref, T_icp, s_icp)
     centre = (s_opt * src @ T_opt[:3, :3].T + T_opt[:3, 3]).mean(axis=0)
     reference = ReferenceCloud(ref)
 
@@ -162,6 +165,7 @@ def held_out() -> dict:
     c_src = src.mean(axis=0)
     return {"optimum_vs_gt": dict(zip(("rot_deg", "t_m", "scale_rel"), pose_errors(T_opt, s_opt, T_gt, 1.0),
                                       strict=True)),
+            "open3d_from_gt": score(T_icp, s_icp, 1.0, c_src),
             "lightfast_from_gt": score(own.T_ref_cur, own.sigma, 1.0, c_src), "rows": rows}
 
 
@@ -182,8 +186,10 @@ def held_out_lines(h: dict) -> list[str]:
         "",
         "`src.npy` → `ref.npy` at their own density (the tests' clouds), from the 20 starts of "
         "`test_fast_alignment.HELD_OUT_SEEDS` (seeds fixed before they were first run; fast_align was developed on "
-        "other seeds). Errors against the pair's optimum, Open3D's scaled point-to-point ICP (correspondences within "
-        f"{100 * OPTIMUM_DISTANCE_M:.0f} cm) started at `gt.npy`, which lies "
+        "other seeds). Errors against the pair's optimum: the minimum of the objective of Open3D's scaled "
+        f"point-to-point ICP (correspondences within {100 * OPTIMUM_DISTANCE_M:.0f} cm; mean of min(d, "
+        f"{100 * OPTIMUM_DISTANCE_M:.0f} cm)² over every current point), reached from `gt.npy` by that ICP and then "
+        "Powell's descent of the same objective, which lies "
         f"{h['optimum_vs_gt']['rot_deg']:.2f}°, {100 * h['optimum_vs_gt']['t_m']:.1f} cm, "
         f"{100 * h['optimum_vs_gt']['scale_rel']:.2f} % from `gt.npy`. *t* is the translation of T_ref_cur (the "
         "current frame's origin, ~2.3 m from the clouds: 0.25° there is 1 cm); *centroid* is how far the current "
@@ -228,8 +234,13 @@ def held_out_lines(h: dict) -> list[str]:
             f"the optimum is) | {sum(d['hit'] for d in restarts)}/{len(restarts)} | "
             f"{sum(not far(d) for d in restarts)}/{len(restarts)} | — | — | {med['rot_deg']:.3f} | "
             f"{100 * med['t_m']:.2f} | {100 * med['scale_rel']:.3f} | | |")
-    own = h["lightfast_from_gt"]
+    own, icp = h["lightfast_from_gt"], h["open3d_from_gt"]
     lines += [
+        "",
+        f"Open3D's scaled ICP started at `gt.npy` stands still {icp['rot_deg']:.3f}°, {100 * icp['t_m']:.2f} cm, "
+        f"{100 * icp['scale_rel']:.3f} % from the optimum, where its correspondences stop changing, not at the "
+        "minimum of its own objective (the reference of this table before 2026-11-27; "
+        "`test_open3d_stops_short_of_its_own_minimum`).",
         "",
         f"`fast_align` started at `gt.npy` itself (σ = 1) stops {own['rot_deg']:.3f}°, {100 * own['t_m']:.2f} cm, "
         f"{100 * own['scale_rel']:.3f} % from the optimum (centroid {100 * own['centroid_m']:.2f} cm): its own "
@@ -347,9 +358,11 @@ def main() -> int:
     sets = build_sets(args.points, args.sigma)
     base = FastAlignmentConfig()
     pair, surface = sets
-    # the pair's own optimum at this density: Open3D's scaled point-to-point ICP from gt.npy
-    T_opt, sigma_opt = _open3d_scaled_icp(pair.current, np.asarray(pair.reference.points_m), pair.T, pair.sigma,
-                                          OPTIMUM_DISTANCE_M)
+    # the pair's own optimum at this density: Open3D's scaled point-to-point ICP from gt.npy, then its objective's
+    # descent (as the tests do)
+    ref_pts = np.asarray(pair.reference.points_m)
+    T_opt, sigma_opt = descend_truncated_cost(
+        pair.current, ref_pts, *_open3d_scaled_icp(pair.current, ref_pts, pair.T, pair.sigma, OPTIMUM_DISTANCE_M))
     gt_vs_opt = pose_errors(T_opt, sigma_opt, pair.T, pair.sigma)
 
     runs: list[tuple[str, str, str, dict]] = []
@@ -409,8 +422,9 @@ def main() -> int:
         "Sets: *surface* = reference fragment split with ~55 % overlap, current part re-sampled with 2 mm noise and "
         "moved by a known similarity (exact truth). *pair* = `src.npy` → `ref.npy`, errors against `gt.npy`; "
         f"`gt.npy` itself is {gt_vs_opt[0]:.2f}°, {100 * gt_vs_opt[1]:.1f} cm, {100 * gt_vs_opt[2]:.2f} % from the "
-        "pair's own optimum at this density (Open3D's scaled point-to-point ICP run from `gt.npy`, correspondences "
-        f"within {100 * OPTIMUM_DISTANCE_M:.0f} cm), so those errors measure the ground truth as much as the method. "
+        "pair's own optimum at this density (the minimum of the objective of Open3D's scaled point-to-point ICP, "
+        f"correspondences within {100 * OPTIMUM_DISTANCE_M:.0f} cm, reached from `gt.npy`), so those errors measure "
+        "the ground truth as much as the method. "
         f"Against that optimum the cold pair runs end within {rel_max[0]:.3f}°, {100 * rel_max[1]:.2f} cm, "
         f"{100 * rel_max[2]:.3f} %. The pair's scale is weakly determined (a long, flat valley of the cost), which "
         "is why it needs more iterations than the surface.",
