@@ -26,13 +26,14 @@ def _turned(T: np.ndarray, deg: float, axis, centre: np.ndarray) -> np.ndarray:
 
 
 def test_the_best_fitting_start_wins_on_a_real_surface(real_surface) -> None:  # noqa: F811 (fixture)
-    """A start 35° off settles in a wrong minimum; among it and two other starts the right one has the highest
-    fitness and is returned with its index."""
+    """A start 45° off settles in a wrong minimum (35° did with the faster kernel decay of 0.8 and σ_p estimated from
+    the first iteration; now it converges); among it and two other starts the right one has the highest fitness
+    and is returned with its index."""
     ref_cloud, current_ref = real_surface
     sigma = 1.0
     current = _as_current(current_ref, sigma)
     c = current_ref.mean(axis=0)
-    far = _turned(_true_pose(), 35.0, [0.2, 1.0, 0.3], c)
+    far = _turned(_true_pose(), 45.0, [0.2, 1.0, 0.3], c)
     near = _turned(_true_pose(), 4.0, [1.0, 0.0, 0.5], c)
     single = fast_align(current, ref_cloud, T_ref_cur_init=far, sigma_init=sigma)
     assert _errors(single, _true_pose(), sigma)[0] > 2.0  # the far start alone fails

@@ -37,8 +37,10 @@ from lightfast.racr.alignment_job import AlignmentJob, _Observation
 SIGMAS = (0.5, 0.8, 1.6, 2.0)
 R_TRUE = so3_exp(np.array([0.3, -0.5, 0.2]))  # the known similarity of the real-surface set
 T_TRUE_M = np.array([0.4, -0.2, 1.0])
-#: the pair's held-out starts, fixed before they were first run (development used seeds 1000-1129)
-HELD_OUT_SEEDS = tuple(range(20))
+#: the pair's held-out starts (round 2, benchmarks/results/HELDOUT.md), drawn and written down before they were
+#: first run; development used seeds 1000-1129, round 1's seeds 0-19 were seen before the method last changed
+HELD_OUT_SEEDS = (4252, 7284, 7859, 11135, 17375, 23312, 33065, 33109, 35100, 37486, 38220, 42614, 51353, 55035,
+                  63026, 67417, 68242, 72266, 80136, 91694)
 OPTIMUM_DISTANCE_M = 0.02  # Open3D's correspondence distance for the pair's optimum (= kernel_final_m)
 
 
@@ -347,15 +349,16 @@ def test_no_held_out_start_is_reported_converged_far_from_the_optimum(held_out_r
 
 @pytest.fixture(scope="module")
 def planted_wrong_start(pair) -> np.ndarray:
-    """``gt.npy`` shifted 30 cm along the reference's −x: the alignment slides into a wrong local minimum there."""
+    """``gt.npy`` shifted 40 cm along the reference's −x: the alignment slides into a wrong local minimum there (from
+    30 cm it was still sliding at the iteration cap)."""
     T0 = pair[2].copy()
-    T0[:3, 3] += [-0.3, 0.0, 0.0]
+    T0[:3, 3] += [-0.4, 0.0, 0.0]
     return T0
 
 
 def test_a_wrong_local_minimum_is_not_reported_converged(pair, pair_reference, planted_wrong_start) -> None:
     """A wrong local minimum is a fixed point of the iteration like the right one: the step test alone
-    (``min_fitness=0``) called this stop, 37 cm and 4.5 % from gt.npy on a fit of 0.25 of the points, converged.
+    (``min_fitness=0``) called this stop, 50 cm and 2.6 % from gt.npy on a fit of 0.22 of the points, converged.
     The fit criterion rejects it, and it does not reject the right minimum (0.35 of the points)."""
     src, _, T_gt = pair
     wrong_off = fast_align(src, pair_reference, T_ref_cur_init=planted_wrong_start,
