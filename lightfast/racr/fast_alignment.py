@@ -19,7 +19,8 @@ least ``min_fitness`` of the sampled points (a wrong local minimum stops the ite
   same closed form on the residual projected onto the reference normal (Eq. 14 for step 1's point-to-plane E_g,
   so both steps descend one objective). ``scale_pivot="centroid"`` (default) evaluates Eq. 15 about the weighted
   centroid of the matched points, ``"origin"`` about the frame origin as the paper does. ``estimate_scale=False``
-  skips this step and keeps ``σ_p = sigma_init``: the paper's ablation rACR-S (§5.4).
+  skips this step and keeps ``σ_p = sigma_init``: the paper's ablation rACR-S (§5.4). σ_p is also held while the
+  kernel is wider than ``scale_kernel_m`` (points outside the overlap match wrong points there and bias Eq. 15).
 
 Deviations from the paper — each current point paired with its nearest reference point (the reference carries the
 only KD-tree, :class:`ReferenceCloud`); a Tukey biweight annealed from ``kernel_initial_m`` to ``kernel_final_m``
