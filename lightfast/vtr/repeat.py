@@ -14,7 +14,8 @@ their ``camera_info`` projection matrices in, :class:`RepeatResult` out):
    :class:`~lightfast.vtr.localization.MapLocalizer` (modes ``fused``, ``grey``, ``mcmanus``), within the prior gate
    ``prior_gate_m + prior_gate_per_m · (distance on VO)`` of the VO prior — unless the previous frame's localization
    was beyond the gate as well, both have ``confirm_beyond_gate_inliers`` inliers and they agree after the VO motion
-   between them: then the prior is the wrong one (a VO step gone astray).
+   between them: then the prior is the wrong one (a VO step gone astray). An accepted localization within the gate
+   is fused with the prior by their covariances (:mod:`lightfast.vtr.vo_prior`, ``fuse_vo_prior``).
 5. **Failure handling** (§IV-C): without success the VO prior is the pose and the distance driven on VO alone
    accumulates; beyond ``max_distance_on_vo_m`` (20 m) it is a **localization failure**: the robot "stops" and the
    whole map is searched (:mod:`lightfast.vtr.map_search`) every frame until a place has the evidence that rules
@@ -51,6 +52,7 @@ from lightfast.vtr.stereo_config import StereoConfig
 from lightfast.vtr.stereo_front_end import check_stereo_pair
 from lightfast.vtr.teach import SourceFrontEnd
 from lightfast.vtr.visual_odometry import VisualOdometry, VisualOdometryConfig, VoResult
+from lightfast.vtr.vo_prior import add_keyframe_noise, fuse, propagate_covariance
 
 __all__ = ["RepeatPipeline", "RepeatResult"]
 
@@ -61,8 +63,9 @@ log = logging.getLogger(__name__)
 class RepeatResult:
     """One repeat step (module docstring). ``T_kf_cam`` is ``None`` (and ``keyframe_index`` −1) until the first
     localization; ``T_prev_cur`` is the VO motion used (m); ``distance_along_path_m`` the position along the taught
-    path; ``covariance`` that of the localization on localized frames (6×6, ξ = (ρ, φ) in
-    ``T_kf_cam · exp(ξ)``, camera frame, nominal 1 px noise), else ``None``; ``timing_s`` the time per stage (s)."""
+    path; ``covariance`` that of the pose on localized frames (6×6, ξ = (ρ, φ) in ``T_kf_cam · exp(ξ)``, camera
+    frame: the localization's nominal one × ``localization_cov_scale²``, fused with the VO prior's), else ``None``;
+    ``timing_s`` the time per stage (s)."""
 
     stamp_ns: int
     T_kf_cam: NDArray[np.float64] | None
@@ -124,6 +127,7 @@ class RepeatPipeline:
         self.vo.reset()
         self._ref = -1
         self._T_ref_cam: NDArray[np.float64] | None = None
+        self._cov: NDArray[np.float64] | None = None  # of _T_ref_cam (vo_prior's convention); None: unknown
         self._distance_on_vo_m = 0.0
         self._lost = False
         self._gated: tuple[int, NDArray[np.float64]] | None = None  # last frame's localization beyond the gate
@@ -192,9 +196,15 @@ class RepeatPipeline:
         motion = vo.T_prev_cur
         step_m = 0.0 if vo.first else float(np.linalg.norm(motion[:3, 3]))
 
-        ref, prior = -1, None
+        ref, prior, prior_cov = -1, None, None
         if self._T_ref_cam is not None:
             ref, prior = self._reanchor(self._ref, self._T_ref_cam @ motion)
+            if self._cov is not None:
+                prior_cov = propagate_covariance(self._cov, motion, step_m, c.vo_position_noise_per_m,
+                                                 c.vo_rotation_noise_deg_per_m)
+                if ref != self._ref:
+                    prior_cov = add_keyframe_noise(prior_cov, c.keyframe_position_noise_m,
+                                                   c.keyframe_rotation_noise_deg)
 
         loc: Localization | None = None
         localized = relocalized = searched = failure = False
@@ -209,9 +219,15 @@ class RepeatPipeline:
             loc = self.localizer.localize(features, camera, ref, self.map.window(ref, c.window_radius), prior, more,
                                           gate)
             localized = loc.success or self._confirmed(loc, motion)
+            loc = self._scaled(loc)
+            if loc.success and c.fuse_vo_prior and prior_cov is not None:
+                T_prior = self.map.T_a_b(loc.ref_index, ref) @ prior if loc.ref_index != ref else prior
+                T_fused, cov = fuse(loc.T_ref_cam, loc.covariance, T_prior, prior_cov)
+                loc = replace(loc, T_ref_cam=T_fused, covariance=cov)
         elif start_hint:
             k0 = c.initial_keyframe
-            loc = self.localizer.localize(features, camera, k0, self.map.window(k0, c.window_radius), None, more)
+            loc = self._scaled(self.localizer.localize(features, camera, k0, self.map.window(k0, c.window_radius),
+                                                       None, more))
             localized = loc.success
         timing["localization"] = time.perf_counter() - t
 
@@ -227,7 +243,7 @@ class RepeatPipeline:
                 failure = True
                 if not start_hint:
                     t = time.perf_counter()
-                    loc = self.localizer.search(features, camera, more)
+                    loc = self._scaled(self.localizer.search(features, camera, more))
                     timing["search"] = time.perf_counter() - t
                     searched = True
                     if loc.success and self._unambiguous(loc):
@@ -248,8 +264,11 @@ class RepeatPipeline:
             assert loc is not None
             self._distance_on_vo_m = 0.0
             self._ref, self._T_ref_cam = self._reanchor(loc.ref_index, loc.T_ref_cam)
+            self._cov = loc.covariance if np.all(np.isfinite(loc.covariance)) else None
+            if self._cov is not None and self._ref != loc.ref_index:
+                self._cov = add_keyframe_noise(self._cov, c.keyframe_position_noise_m, c.keyframe_rotation_noise_deg)
         elif prior is not None:
-            self._ref, self._T_ref_cam = ref, prior
+            self._ref, self._T_ref_cam, self._cov = ref, prior, prior_cov
 
         along = float("nan")
         if self._T_ref_cam is not None:
@@ -273,6 +292,10 @@ class RepeatPipeline:
             covariance=loc.covariance.copy() if (localized and loc is not None) else None,
             timing_s=timing,
         )
+
+    def _scaled(self, loc: Localization) -> Localization:
+        """``loc`` with its covariance scaled by ``localization_cov_scale²`` (:mod:`lightfast.vtr.vo_prior`)."""
+        return replace(loc, covariance=self.config.localization_cov_scale ** 2 * loc.covariance)
 
     def _unambiguous(self, loc: Localization) -> bool:
         """A place of the whole-map search with the evidence that rules out look-alikes: ``search_min_inliers``

@@ -93,6 +93,30 @@ class RepeatConfig(Config):
         "following localization, 45-108 inliers, fail the gate until the 20 m failure; with no inlier minimum, "
         "consecutive wrong localizations of 13 inliers in the sand of repeat07 were accepted). 0: never.", min=0,
     )
+    fuse_vo_prior: bool = param(
+        True, description="Fuse an accepted windowed localization with the VO prior by their covariances (the "
+        "paper's 'VO estimate is fed to the localizer as a prior'); False: the localization replaces the prior.",
+    )
+    localization_cov_scale: float = param(
+        5.0, description="Standard deviations of a localization = this x those of its nominal covariance (1 px "
+        "noise), for the fusion: the nominal one ignores landmark depth noise and the teach edges of the window "
+        "(development route 7: errors over 1 m scored a median NEES of ~600 against it; 3-5 fused well, 10 trusted "
+        "VO too much).", min=1e-3,
+    )
+    vo_position_noise_per_m: float = param(
+        0.06, description="VO position noise (standard deviation) per metre driven, for the prior's covariance, m/m.",
+        min=1e-6,
+    )
+    vo_rotation_noise_deg_per_m: float = param(
+        0.2, description="VO rotation noise (standard deviation) per metre driven, deg/m.", min=1e-6,
+    )
+    keyframe_position_noise_m: float = param(
+        0.1, description="Position noise added to the prior's covariance when it moves to another keyframe (a teach "
+        "edge: the development route's edges are ~0.1 m off per 1.6 m), m.", min=0.0,
+    )
+    keyframe_rotation_noise_deg: float = param(
+        0.15, description="Rotation noise added when the prior moves to another keyframe, deg.", min=0.0,
+    )
     search_min_inliers: int = param(
         12, description="A place found by the whole-map search is accepted only with at least this many inliers: "
         "it is chosen among every keyframe window of the map, so a look-alike place reaches the 6 of a local "

@@ -1,0 +1,69 @@
+"""The VO prior of a localization: paper §IV-B ("The VO estimate is fed to the localizer as a prior").
+
+The repeat keeps a belief of the camera pose in its reference keyframe's frame — the pose ``T_ref_cam`` and a 6×6
+covariance of ``ξ = (ρ, φ)`` in ``T_ref_cam · exp(ξ)`` (camera frame, m and rad, the convention of
+:class:`~lightfast.vtr.localization.Localization`). Between localizations the VO motion ``M = T_prev_cur`` carries
+it: ``ξ_cur = Ad(M⁻¹) ξ_prev`` plus VO noise growing with the distance driven (:func:`propagate_covariance`); a
+change of reference keyframe adds the uncertainty of a teach edge (:func:`add_keyframe_noise`). An accepted windowed
+localization is then fused with the prior in information form (:func:`fuse`, one Gauss–Newton step of the two
+quadratic terms), instead of replacing it: a localization resting on far landmarks constrains the camera's position
+along its optical axis poorly, and the prior holds what the image cannot (measured on the development route:
+``docs/vtr.md``). The localization's covariance is its nominal one (1 px noise) times ``cov_scale²``: the nominal
+covariance ignores landmark depth noise and the window's chained teach edges and is far too small.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import NDArray
+
+from lightfast.geometry import inverse, se3_exp, se3_log
+
+__all__ = ["add_keyframe_noise", "adjoint", "fuse", "propagate_covariance"]
+
+Array = NDArray[np.float64]
+
+
+def adjoint(T: Array) -> Array:
+    """Adjoint of a rigid transform acting on twists ``(ρ, φ)``: ``T exp(ξ) T⁻¹ = exp(Ad(T) ξ)``."""
+    R, t = T[:3, :3], T[:3, 3]
+    tx = np.array([[0.0, -t[2], t[1]], [t[2], 0.0, -t[0]], [-t[1], t[0], 0.0]])
+    A = np.zeros((6, 6))
+    A[:3, :3] = R
+    A[:3, 3:] = tx @ R
+    A[3:, 3:] = R
+    return A
+
+
+def _diagonal(position_std_m: float, rotation_std_rad: float) -> Array:
+    return np.diag([position_std_m**2] * 3 + [rotation_std_rad**2] * 3)
+
+
+def propagate_covariance(P: Array, T_prev_cur: Array, step_m: float, position_noise_per_m: float,
+                         rotation_noise_deg_per_m: float) -> Array:
+    """The covariance of ``T_ref_cur = T_ref_prev · T_prev_cur`` from that of ``T_ref_prev``, with VO noise of
+    ``position_noise_per_m`` m and ``rotation_noise_deg_per_m`` degrees (standard deviations) per metre driven."""
+    A = adjoint(inverse(T_prev_cur))
+    return A @ P @ A.T + _diagonal(position_noise_per_m * step_m, math.radians(rotation_noise_deg_per_m) * step_m)
+
+
+def add_keyframe_noise(P: Array, position_std_m: float, rotation_std_deg: float) -> Array:
+    """``P`` re-expressed in another keyframe's frame through one teach edge of the given uncertainty."""
+    return P + _diagonal(position_std_m, math.radians(rotation_std_deg))
+
+
+def fuse(T_loc: Array, C_loc: Array, T_prior: Array, P_prior: Array) -> tuple[Array, Array]:
+    """The localization ``(T_loc, C_loc)`` fused with the prior ``(T_prior, P_prior)`` (same frame):
+    ``(T, C)`` minimizing ``‖ξ‖²_{C_loc} + ‖ξ − δ‖²_{P_prior}`` with ``T_prior = T_loc · exp(δ)``,
+    ``T = T_loc · exp(ξ)``. Returns the localization unchanged if either covariance is not finite and positive
+    definite."""
+    try:
+        info_loc, info_prior = np.linalg.inv(C_loc), np.linalg.inv(P_prior)
+        C = np.linalg.inv(info_loc + info_prior)
+    except np.linalg.LinAlgError:
+        return T_loc, C_loc
+    if not (np.all(np.isfinite(C)) and np.all(np.linalg.eigvalsh(0.5 * (C + C.T)) > 0.0)):
+        return T_loc, C_loc
+    xi = C @ info_prior @ se3_log(inverse(T_loc) @ T_prior)
+    return T_loc @ se3_exp(xi), C
