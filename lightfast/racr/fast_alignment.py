@@ -138,6 +138,11 @@ class FastAlignmentConfig(Config):
                 f"FastAlignmentConfig.kernel_final_m={self.kernel_final_m} exceeds kernel_initial_m="
                 f"{self.kernel_initial_m}"
             )
+        if 0.0 < self.scale_kernel_m < self.kernel_final_m:
+            raise ConfigError(
+                f"FastAlignmentConfig.scale_kernel_m={self.scale_kernel_m} is below kernel_final_m="
+                f"{self.kernel_final_m}: sigma_p would never be estimated (use estimate_scale=False for that)"
+            )
         if not self.min_scale < self.max_scale:
             raise ConfigError("FastAlignmentConfig.min_scale must be below max_scale")
         if self.query_workers == 0:

@@ -486,6 +486,9 @@ def test_config_is_validated() -> None:
         FastAlignmentConfig(scale_residual="sparse")
     with pytest.raises(ConfigError):
         FastAlignmentConfig(query_workers=0)
+    with pytest.raises(ConfigError, match="never be estimated"):
+        FastAlignmentConfig(scale_kernel_m=0.01)
+    FastAlignmentConfig(scale_kernel_m=0.0)  # 0: from the first iteration
 
 
 def test_reference_without_normals_raises() -> None:
