@@ -61,23 +61,34 @@ def _rate(flags: list[bool]) -> float:
 
 
 def run_racr(work: Path, jobs: int) -> None:
-    from lightfast.eval.racr import evaluate_racr, paired
+    from lightfast.eval.racr import evaluate_racr
     from lightfast.sim.racr import generate_racr_set
 
     t0 = time.perf_counter()
-    runs, by_seed = [], {}
+    runs: list[Any] = []
+    by_seed: dict[str, int] = {}
     for seed in RACR_SEEDS:
         scenes, out = work / f"racr_scenes_{seed}", work / f"racr_eval_{seed}"
         generate_racr_set(scenes, seed=seed, progress=True, previews=False)
         wanted = {("racr", "varied"), ("racr-serial", "varied"), ("acr", "varied")}
-        # each call returns every record of these scenes and this protocol (any method and lighting)
-        recorded = evaluate_racr(scenes, out, methods=("racr", "racr-serial", "acr"), lightings=("varied",), jobs=jobs)
+        # each call returns the records of these scenes under the code as it is when the call starts: keep both
+        # calls' (a second call's protocol differs from the first's if the code changed in between)
+        recorded = {r.key: r for r in evaluate_racr(scenes, out, methods=("racr", "racr-serial", "acr"),
+                                                    lightings=("varied",), jobs=jobs)}
         if seed == RACR_SEEDS[0]:
             wanted.add(("racr", "similar"))
-            recorded = evaluate_racr(scenes, out, methods=("racr",), lightings=("similar",), jobs=jobs)
-        got = [r for r in recorded if (r.method, r.lighting) in wanted]
+            recorded |= {r.key: r for r in evaluate_racr(scenes, out, methods=("racr",), lightings=("similar",),
+                                                         jobs=jobs)}
+        got = [r for r in recorded.values() if (r.method, r.lighting) in wanted]
         runs += got
         by_seed |= {r.key: seed for r in got}
+    write_racr_summary(runs, by_seed, time.perf_counter() - t0)
+
+
+def write_racr_summary(runs: list[Any], by_seed: dict[str, int], wall_s: float) -> None:
+    """``eval_racr/heldout_summary.json`` and ``heldout_table.md`` from the run records ``runs`` (``by_seed``: the
+    scene set of each record's key)."""
+    from lightfast.eval.racr import paired
 
     def stats(method: str, lighting: str) -> dict[str, Any]:
         rs = [r for r in runs if r.method == method and r.lighting == lighting]
@@ -90,7 +101,10 @@ def run_racr(work: Path, jobs: int) -> None:
                 "failures": [{"seed": by_seed.get(r.key), "scene": r.scene, "afd_px": r.afd_px,
                               "reported": r.reported} for r in fails]}
 
-    pairs = [(p, s) for p, s in paired(runs, "racr", "racr-serial") if p.lighting == "varied"]
+    # paired per scene set: scene names (S01 ...) repeat across the sets
+    pairs = [(p, s) for seed in sorted(set(by_seed.values()))
+             for p, s in paired([r for r in runs if by_seed.get(r.key) == seed], "racr", "racr-serial")
+             if p.lighting == "varied"]
     par = float(np.mean([p.time_total_s for p, _ in pairs])) if pairs else math.nan
     ser = float(np.mean([s.time_total_s for _, s in pairs])) if pairs else math.nan
     racr = stats("racr", "varied")
@@ -103,7 +117,7 @@ def run_racr(work: Path, jobs: int) -> None:
         "parallel_speedup": ser / par if par > 0 else math.nan, "paired_runs": len(pairs),
         "per_method": {f"{m}/{lt}": stats(m, lt) for m, lt in (("racr", "varied"), ("racr-serial", "varied"),
                                                                ("acr", "varied"), ("racr", "similar"))},
-        "machine": _machine(), "wall_s": time.perf_counter() - t0,
+        "machine": _machine(), "wall_s": wall_s,
     }
     out_dir = RESULTS / "eval_racr"
     _write_json(out_dir / "heldout_summary.json", summary)
@@ -161,9 +175,9 @@ def run_vtr(work: Path, jobs: int) -> None:
              "estimate is more than 1 m off (the published score counts any localization).", "",
              "| route | mode | strict autonomy | published score | failures | search places accepted > 5 m off |",
              "|---|---|---:|---:|---:|---:|"]
-    for seed, modes in per_route.items():
+    for route, modes in per_route.items():
         for m, o in modes.items():
-            lines.append(f"| {seed} | {m} | {100 * o['strict_autonomy']:.2f} % | {100 * o['autonomy']:.2f} % | "
+            lines.append(f"| {route} | {m} | {100 * o['strict_autonomy']:.2f} % | {100 * o['autonomy']:.2f} % | "
                          f"{o['failures']} | {o['false_accepts_over_5m']} |")
     for m, o in (("fused", fused), ("grey", grey)):
         lines.append(f"| **all** | {m} | **{100 * o['strict_autonomy']:.2f} %** | {100 * o['autonomy']:.2f} % | "
