@@ -14,8 +14,7 @@ their ``camera_info`` projection matrices in, :class:`RepeatResult` out):
    :class:`~lightfast.vtr.localization.MapLocalizer` (modes ``fused``, ``grey``, ``mcmanus``), within the prior gate
    ``prior_gate_m + prior_gate_per_m · (distance on VO)`` of the VO prior — unless the previous frame's localization
    was beyond the gate as well, both have ``confirm_beyond_gate_inliers`` inliers and they agree after the VO motion
-   between them: then the prior is the wrong one (a VO step gone astray). An accepted localization within the gate
-   is fused with the prior by their covariances (:mod:`lightfast.vtr.vo_prior`, ``fuse_vo_prior``).
+   between them: then the prior is the wrong one (a VO step gone astray); else it is fused with it (``vo_prior``).
 5. **Failure handling** (§IV-C): without success the VO prior is the pose and the distance driven on VO alone
    accumulates; beyond ``max_distance_on_vo_m`` (20 m) it is a **localization failure**: the robot "stops" and the
    whole map is searched (:mod:`lightfast.vtr.map_search`) every frame until a place has the evidence that rules
