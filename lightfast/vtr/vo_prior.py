@@ -18,7 +18,7 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
-from lightfast.geometry import inverse, se3_exp, se3_log
+from lightfast.geometry import hat, inverse, se3_exp, se3_log
 
 __all__ = ["add_keyframe_noise", "adjoint", "fuse", "propagate_covariance"]
 
@@ -27,11 +27,10 @@ Array = NDArray[np.float64]
 
 def adjoint(T: Array) -> Array:
     """Adjoint of a rigid transform acting on twists ``(ρ, φ)``: ``T exp(ξ) T⁻¹ = exp(Ad(T) ξ)``."""
-    R, t = T[:3, :3], T[:3, 3]
-    tx = np.array([[0.0, -t[2], t[1]], [t[2], 0.0, -t[0]], [-t[1], t[0], 0.0]])
+    R = T[:3, :3]
     A = np.zeros((6, 6))
     A[:3, :3] = R
-    A[:3, 3:] = tx @ R
+    A[:3, 3:] = hat(T[:3, 3]) @ R
     A[3:, 3:] = R
     return A
 
