@@ -7,8 +7,8 @@ period), and g ≤ η then holds at the wrong place. The checks use evidence the
 1. SIFT matches between the reference image and the current VSE keyframes (:func:`verify`): each reference keypoint
    is lifted to 3-D with the reference cloud (the nearest projected point within ``depth_radius_px``) and projected
    into the keyframe with the estimate (``T_ref_cam = T_p ⟨R_A, σ_p s t_A⟩``, Eq. 2–3); it *agrees* within
-   ``agree_px``. ``min_agreeing`` agreeing matches verify; a PnP RANSAC pose elsewhere with ``min_other_pose``
-   inliers that moves the keypoints by more than ``agree_px`` makes the convergence ``failed``.
+   ``verify_px`` (keypoint noise). ``min_agreeing`` agreeing matches verify; a PnP RANSAC pose elsewhere with
+   ``min_other_pose`` inliers that moves the keypoints by more than ``agree_px`` makes the convergence ``failed``.
 2. The image as a whole, when matches cannot tell (:func:`image_shift`): each keyframe is warped into the reference
    view by the estimate (the homography of the plane at the reference's median depth) and its gradient magnitude
    (edges of the relief stay edges whichever side the light comes from) is phase-correlated with the reference's.
@@ -31,10 +31,11 @@ import cv2
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import ndimage
+from scipy.optimize import least_squares
 
 from lightfast.camera import PinholeCamera
-from lightfast.config import Config, param
-from lightfast.geometry import inverse, transform_points
+from lightfast.config import Config, ConfigError, param
+from lightfast.geometry import inverse, make_transform, so3_exp, transform_points
 from lightfast.racr.acr_baseline import AcrConfig, sift_matches
 from lightfast.racr.errors import AlignmentError
 from lightfast.racr.fast_alignment import FastAlignmentConfig, ReferenceCloud, fast_align
@@ -55,8 +56,12 @@ class VerificationConfig(Config):
     agree_px: float = param(4.0, description="A reference feature agrees with the estimate when it reprojects this "
                             "close to its match in a keyframe, px (the success criterion is AFD < 3 px, plus about "
                             "1 px of keypoint noise).", min=0.5, max=50.0)
-    min_agreeing: int = param(6, description="Agreeing matches (over all keyframes) that verify a convergence (a "
-                              "wrong match lands within agree_px of its prediction by chance with a probability "
+    verify_px: float = param(2.0, description="A match verifies a convergence only when it reprojects this close "
+                             "to its prediction, px (keypoint noise: SIFT locates a feature to about 0.5 px). An "
+                             "estimate a few cm off still puts some right matches within agree_px, near where the "
+                             "error moves the image least.", min=0.5, max=50.0)
+    min_agreeing: int = param(6, description="Matches (over all keyframes) within verify_px of their prediction that "
+                              "verify a convergence (a wrong match lands that close by chance with a probability "
                               "below 1e-3: six cannot be chance).", min=3)
     min_other_pose: int = param(12, description="PnP inliers at another camera pose that make a convergence failed "
                                 "(more than min_agreeing: RANSAC fits a few wrong matches by chance).", min=6)
@@ -74,6 +79,11 @@ class VerificationConfig(Config):
                                        "fitness is at least this share of the estimate's (ambiguous), and a better "
                                        "fit when the estimate's is at most this share of its (failed).", min=0.01,
                                        max=1.0)
+
+    def check(self) -> None:
+        if self.verify_px > self.agree_px:
+            raise ConfigError(f"VerificationConfig.verify_px={self.verify_px} exceeds agree_px={self.agree_px}: a "
+                              "match would verify where it does not even agree")
 
 
 @dataclass(frozen=True)
@@ -184,6 +194,7 @@ def verify(view: ReferenceView, keyframes: Sequence[tuple[ArrayLike, ArrayLike, 
     cfg = view.config
     matches = agreeing = best_other = 0
     disagreement = float("nan")
+    matched: list[_Matches] = []
     for image, T_ref_cam, cam in keyframes:
         p_kf, p_ref = sift_matches(image, view.image, AcrConfig())
         X_ref, ok = view.lift(p_ref)
@@ -191,11 +202,11 @@ def verify(view: ReferenceView, keyframes: Sequence[tuple[ArrayLike, ArrayLike, 
         matches += len(p_kf)
         if len(p_kf) == 0:
             continue
-        T_cam_ref = inverse(np.asarray(T_ref_cam, dtype=np.float64))
-        X_cam = (T_cam_ref @ np.c_[X_ref, np.ones(len(X_ref))].T).T[:, :3]
-        uv, front = cam.project(X_cam)
+        m = _Matches(p_kf, X_ref, inverse(np.asarray(T_ref_cam, dtype=np.float64)), cam)
+        matched.append(m)
+        uv, front = cam.project(transform_points(m.T_cam_ref, X_ref))
         err = np.where(front, np.linalg.norm(uv - p_kf, axis=1), np.inf)
-        agreeing += int(np.count_nonzero(err <= cfg.agree_px))
+        agreeing += int(np.count_nonzero(err <= cfg.verify_px))
         if len(p_kf) < cfg.min_other_pose:
             continue
         found, rvec, tvec, inliers = cv2.solvePnPRansac(
@@ -211,12 +222,64 @@ def verify(view: ReferenceView, keyframes: Sequence[tuple[ArrayLike, ArrayLike, 
         best_other, disagreement = len(idx), moved
     if agreeing >= cfg.min_agreeing:
         return Verification("verified", matches, agreeing, best_other, disagreement)
+    support, moved = _corrected_pose(view, matched)
+    if support > max(best_other, agreeing):
+        best_other, disagreement = support, moved
     if best_other >= cfg.min_other_pose and disagreement > cfg.agree_px:
         return Verification("failed", matches, agreeing, best_other, disagreement)
     shift = image_shift(view, keyframes)
     if shift.agreeing >= cfg.shift_min_keyframes and shift.norm_px > cfg.agree_px:
         return Verification("failed", matches, agreeing, 0, shift=shift)
     return Verification("ambiguous", matches, agreeing, best_other, disagreement, shift=shift)
+
+
+@dataclass(frozen=True)
+class _Matches:
+    """One keyframe's matches: keypoints (n, 2) px, their reference points (n, 3) m, the estimate's
+    ``T_cam_ref`` and the keyframe's camera."""
+
+    p_kf: Array
+    X_ref: Array
+    T_cam_ref: Array
+    camera: PinholeCamera
+
+
+def _corrected_pose(view: ReferenceView, matched: Sequence[_Matches]) -> tuple[int, float]:
+    """The pose the matches of all keyframes together put the estimate at, near it: one rigid correction ``δ`` of
+    the reference frame (every keyframe's pose is the estimate's, so they share its error), ``T_cam_ref δ⁻¹``,
+    fitted by robust least squares (Cauchy at ``agree_px``, then at ``verify_px``) from the identity. Returns the
+    matches within ``verify_px`` at the corrected pose and the mean displacement (px) of those features between
+    the estimate's and the corrected pose's projections ((0, NaN) without matches). Unlike a PnP per keyframe it
+    pools the keyframes' matches, which alone are too few (an estimate a few cm off along a facade)."""
+    cfg = view.config
+    if sum(len(m.p_kf) for m in matched) < cfg.min_agreeing:
+        return 0, float("nan")
+    T_ref_camref = view.T_ref_camref
+    T_camref_ref = inverse(T_ref_camref)
+
+    def project(xi: Array) -> list[Array]:
+        delta_inv = T_ref_camref @ make_transform(so3_exp(-xi[:3]), np.zeros(3)) @ make_transform(
+            np.eye(3), -xi[3:]) @ T_camref_ref  # (T_ref_camref exp(xi) T_camref_ref)^-1, xi in the reference camera
+        out = []
+        for m in matched:
+            p = transform_points(m.T_cam_ref @ delta_inv, m.X_ref)
+            out.append((m.camera.K[:2, :2] @ (p[:, :2] / np.maximum(p[:, 2:3], 1e-9)).T).T + m.camera.K[:2, 2])
+        return out
+
+    def residuals(xi: Array) -> Array:
+        return np.concatenate([(uv - m.p_kf).ravel() for uv, m in zip(project(xi), matched, strict=True)])
+
+    xi = np.zeros(6)
+    for f_scale in (cfg.agree_px, cfg.verify_px):
+        xi = least_squares(residuals, xi, loss="cauchy", f_scale=f_scale,
+                           x_scale=np.r_[np.full(3, 0.01), np.full(3, 0.05)]).x
+    uv_fit = np.concatenate(project(xi))
+    uv_est = np.concatenate(project(np.zeros(6)))
+    p_kf = np.concatenate([m.p_kf for m in matched])
+    inlier = np.linalg.norm(uv_fit - p_kf, axis=1) <= cfg.verify_px
+    if not inlier.any():
+        return 0, float("nan")
+    return int(np.count_nonzero(inlier)), float(np.mean(np.linalg.norm(uv_fit[inlier] - uv_est[inlier], axis=1)))
 
 
 def _gradient_magnitude(image: ArrayLike) -> NDArray[np.float32]:

@@ -41,6 +41,29 @@ def test_a_right_estimate_is_verified_and_a_slid_one_failed(scene) -> None:
     assert "disagrees" in wrong.describe()
 
 
+def test_a_near_miss_is_not_verified(scene) -> None:
+    """An estimate slid by about 3 px at the scene's depth (a wrong convergence a few cm off, AFD beyond the success
+    criterion where the error moves the image most) puts right matches 2-4 px from their predictions: within
+    agree_px, yet not at keypoint noise, so they do not verify it."""
+    ref = scene.reference
+    view = ReferenceView(ref.points_m, ref.T_ref_camref, ref.image, ref.camera)
+    kfs = [_keyframe(scene, o) for o in ([0.02, 0.0, 0.0], [-0.02, 0.01, 0.0])]
+    depth = float(np.median(view.depth_m[np.isfinite(view.depth_m)]))
+    slide = make_transform(np.eye(3), [3.0 * depth / scene.camera.fx, 0.0, 0.0])
+    near = verify(view, [(img, T @ slide, scene.camera) for img, T in kfs])
+    assert near.verdict != "verified" and near.agreeing < view.config.min_agreeing, near
+    loose = ReferenceView(ref.points_m, ref.T_ref_camref, ref.image, ref.camera,
+                          VerificationConfig(verify_px=view.config.agree_px))
+    assert verify(loose, [(img, T @ slide, scene.camera) for img, T in kfs]).verdict == "verified"  # as before
+
+
+def test_verify_px_cannot_exceed_agree_px() -> None:
+    from lightfast.config import ConfigError
+
+    with pytest.raises(ConfigError, match="verify_px"):
+        VerificationConfig(verify_px=5.0, agree_px=4.0)
+
+
 def test_too_little_evidence_is_ambiguous(scene) -> None:
     ref = scene.reference
     view = ReferenceView(ref.points_m, ref.T_ref_camref, ref.image, ref.camera, VerificationConfig())
