@@ -2,14 +2,14 @@
 ``benchmarks/results/HELDOUT.md``: the held-out scene sets and routes are generated, evaluated with the node's
 default configuration through ``lightfast eval racr`` / ``lightfast eval vtr`` (the same code), and summarized.
 
-* ``racr``: scene sets 90274 and 62239 (round 2; 20 scenes each), methods rACR, rACR serial and ACR under the
-  ``varied`` lighting, rACR also under ``similar`` on 90274. Writes
+* ``racr``: the scene sets of ``RACR_SEEDS`` (20 scenes each), methods rACR, rACR serial and ACR under the
+  ``varied`` lighting, rACR also under ``similar`` on the first. Writes
   ``benchmarks/results/eval_racr/heldout_summary.json`` and ``heldout_table.md``: success (AFD < 3 px), median AFD,
   the share of failures the method reported itself (failed/ambiguous), the share of successes it did not claim,
   parallel vs serial total time, ACR beside it.
-* ``vtr``: routes 2718 and 3141 (300 m, 320×240, 1 Hz, the teach and all ten repeats), modes fused and grey. Writes
-  ``benchmarks/results/eval_vtr/heldout_summary.json`` and ``heldout_table.md``: strict autonomy (published score
-  beside it), false accepts of the whole-map search over 5 m.
+* ``vtr``: the routes of ``VTR_ROUTES`` (300 m, 320×240, 1 Hz, the teach and all ten repeats), modes fused and
+  grey. Writes ``benchmarks/results/eval_vtr/heldout_summary.json`` and ``heldout_table.md``: strict autonomy
+  (published score beside it), false accepts of the whole-map search over 5 m.
 
 Generated data and per-run records go to ``--work`` (default ``$LIGHTFAST_OUT/heldout`` or ``/tmp/lightfast-heldout``);
 a run already recorded there with the same key (content, configuration, code) is not repeated.
@@ -32,8 +32,8 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ROOT / "benchmarks" / "results"
-#: Chosen before any run and written in benchmarks/results/HELDOUT.md; never used for development. rACR round 3:
-#: round 1's 52361, 80777 and round 2's 90274, 62239 were seen before the method changed (eval_racr/heldout_round*_).
+#: Chosen before any run and written in benchmarks/results/HELDOUT.md; never used for development. rACR round 4:
+#: the seeds of rounds 1-3 were seen before the method changed (eval_racr/heldout_round*_).
 RACR_SEEDS = (21831, 75535)
 VTR_ROUTES = (2718, 3141)
 
