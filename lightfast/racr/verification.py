@@ -7,8 +7,9 @@ period), and g ≤ η then holds at the wrong place. The checks use evidence the
 1. SIFT matches between the reference image and the current VSE keyframes (:func:`verify`): each reference keypoint
    is lifted to 3-D with the reference cloud (the nearest projected point within ``depth_radius_px``) and projected
    into the keyframe with the estimate (``T_ref_cam = T_p ⟨R_A, σ_p s t_A⟩``, Eq. 2–3); it *agrees* within
-   ``verify_px`` (keypoint noise). ``min_agreeing`` agreeing matches verify; a PnP RANSAC pose elsewhere with
-   ``min_other_pose`` inliers that moves the keypoints by more than ``agree_px`` makes the convergence ``failed``.
+   ``verify_px`` (keypoint noise). ``min_agreeing`` agreeing matches verify; a pose elsewhere that moves the
+   keypoints by more than ``agree_px`` with ``min_other_pose`` matches within ``verify_px`` makes the convergence
+   ``failed``: a PnP RANSAC per keyframe, or one correction of the estimate fitted to all keyframes' matches.
 2. The image as a whole, when matches cannot tell (:func:`image_shift`): each keyframe is warped into the reference
    view by the estimate (the homography of the plane at the reference's median depth) and its gradient magnitude
    (edges of the relief stay edges whichever side the light comes from) is phase-correlated with the reference's.
@@ -63,8 +64,9 @@ class VerificationConfig(Config):
     min_agreeing: int = param(6, description="Matches (over all keyframes) within verify_px of their prediction that "
                               "verify a convergence (a wrong match lands that close by chance with a probability "
                               "below 1e-3: six cannot be chance).", min=3)
-    min_other_pose: int = param(12, description="PnP inliers at another camera pose that make a convergence failed "
-                                "(more than min_agreeing: RANSAC fits a few wrong matches by chance).", min=6)
+    min_other_pose: int = param(12, description="Matches agreeing with another camera pose (a keyframe's PnP, or "
+                                "the estimate corrected by all keyframes' matches) that make a convergence failed "
+                                "(more than min_agreeing: a fit finds a few wrong matches to agree by chance).", min=6)
     depth_radius_px: int = param(2, description="A reference keypoint takes the depth of the nearest reference point "
                                  "projected within this many pixels (a semi-dense cloud).", min=0, max=10)
     shift_min_keyframes: int = param(2, description="Keyframes whose image shifts against the reference (phase "
