@@ -18,7 +18,8 @@ their ``camera_info`` projection matrices in, :class:`RepeatResult` out):
 5. **Failure handling** (§IV-C): without success the VO prior is the pose and the distance driven on VO alone
    accumulates; beyond ``max_distance_on_vo_m`` (20 m) it is a **localization failure**: the robot "stops" and the
    whole map is searched (:mod:`lightfast.vtr.map_search`) every frame until a place has the evidence that rules
-   out look-alikes (``search_min_inliers``, ``search_margin``; ``relocalized``). Before
+   out look-alikes (``search_min_inliers``, ``search_margin``, and below ``search_accept_inliers`` the next
+   frame's search finding it again; ``relocalized``). Before
    the first localization the pipeline is in the same state ("the map is searched until the live stereo feed
    localizes"); with ``initial_keyframe`` only the window around that keyframe is tried until the failure distance.
 
@@ -130,9 +131,11 @@ class RepeatPipeline:
         self._distance_on_vo_m = 0.0
         self._lost = False
         self._gated: tuple[int, NDArray[np.float64]] | None = None  # last frame's localization beyond the gate
+        self._held: tuple[int, NDArray[np.float64]] | None = None  # last frame's weak place of the search
         self.frames = 0
         self.failures = 0  # number of localization failures declared (entries into the failure state)
         self.refused_places = 0  # places of the whole-map search refused as ambiguous
+        self.held_places = 0  # weak places of the whole-map search held for the next frame's confirmation
 
     def close(self) -> None:
         self.front.close()
@@ -194,6 +197,7 @@ class RepeatPipeline:
         timing: dict[str, float] = {}
         motion = vo.T_prev_cur
         step_m = 0.0 if vo.first else float(np.linalg.norm(motion[:3, 3]))
+        held, self._held = self._held, None  # the previous frame's weak place: confirmed by this frame's search only
 
         ref, prior, prior_cov = -1, None, None
         if self._T_ref_cam is not None:
@@ -245,11 +249,17 @@ class RepeatPipeline:
                     loc = self._scaled(self.localizer.search(features, camera, more))
                     timing["search"] = time.perf_counter() - t
                     searched = True
-                    if loc.success and self._unambiguous(loc):
+                    if loc.success and self._unambiguous(loc) and self._found_again(loc, held, motion):
                         localized = relocalized = True
                         self._lost = False
                         log.info("relocalized at keyframe %d with %d inliers (next distinct place %d)",
                                  loc.ref_index, loc.inliers, loc.runner_up_inliers)
+                    elif loc.success and self._unambiguous(loc):
+                        self._held = (loc.ref_index, loc.T_ref_cam)
+                        self.held_places += 1
+                        log.info("whole-map search: keyframe %d with %d inliers held until the next frame's search "
+                                 "finds it again (accepted at once from %d)", loc.ref_index, loc.inliers,
+                                 c.search_accept_inliers)
                     elif loc.success:
                         self.refused_places += 1
                         log.info("whole-map search: keyframe %d with %d inliers refused (a distinct place has %d; "
@@ -301,6 +311,19 @@ class RepeatPipeline:
         and ``search_margin`` times the inliers of the best distinct place."""
         c = self.config
         return loc.inliers >= c.search_min_inliers and loc.inliers >= c.search_margin * loc.runner_up_inliers
+
+    def _found_again(self, loc: Localization, held: tuple[int, NDArray[np.float64]] | None,
+                     motion: NDArray[np.float64]) -> bool:
+        """Whether an unambiguous place of the search is accepted: at once with ``search_accept_inliers``, else when
+        the previous frame's search held a place that, moved by the VO ``motion``, lies within ``search_agree_m``."""
+        c = self.config
+        if loc.inliers >= c.search_accept_inliers:
+            return True
+        if held is None:
+            return False
+        ref, T_ref_cam = held
+        expected = self.map.T_a_b(loc.ref_index, ref) @ T_ref_cam @ motion
+        return float(np.linalg.norm(loc.T_ref_cam[:3, 3] - expected[:3, 3])) <= c.search_agree_m
 
     def _strong_beyond_gate(self, loc: Localization) -> bool:
         """Rejected by the prior gate only, with ``confirm_beyond_gate_inliers`` (> 0) inliers."""

@@ -131,6 +131,16 @@ class RepeatConfig(Config):
         5.0, description="Places of the whole-map search this far apart along the taught path count as different "
         "places for search_margin, m.", min=0.0,
     )
+    search_accept_inliers: int = param(
+        40, description="A place of the whole-map search with at least this many inliers is accepted at once; a "
+        "weaker one (search_min_inliers up to this) only when the next frame's search finds it again, where the VO "
+        "motion between the frames puts it (within search_agree_m): a look-alike seldom wins twice in a row. On the "
+        "development routes the wrong places accepted had 12-19 inliers, the right ones 30-800.", min=0,
+    )
+    search_agree_m: float = param(
+        1.0, description="Two consecutive places of the whole-map search agree when their camera positions, after "
+        "the VO motion between the frames, are this close, m.", min=0.0,
+    )
     initial_keyframe: int = param(
         -1, description="Keyframe where the repeat starts (-1: search the whole map for the first localization).",
         min=-1,

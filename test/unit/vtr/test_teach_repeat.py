@@ -640,6 +640,34 @@ def test_whole_map_search_refuses_a_place_with_a_look_alike(taught: Taught, repe
         rp.close()
 
 
+def test_a_weak_place_of_the_search_needs_the_next_frame(taught: Taught, repeat_features):
+    """A place of the whole-map search below search_accept_inliers is held, not accepted: the next frame's search
+    must find it again where the VO motion puts it. Found again: relocalized; the next frame elsewhere (a look-alike
+    won once, or the robot was moved): still lost, that place held instead."""
+    from lightfast.vtr.visual_odometry import VoResult
+
+    camera = StereoCamera.from_projections(P_LEFT, P_RIGHT)
+    feats = repeat_features["teach"]
+    motion = np.linalg.inv(pose(REPEAT_X, REPEAT_Z[12], REPEAT_YAW_DEG)) @ pose(REPEAT_X, REPEAT_Z[13],
+                                                                                REPEAT_YAW_DEG)
+    first = VoResult(np.eye(4), True, 0, 0, False, first=True)
+    step = VoResult(motion, True, 50, 50, True)
+    for accept_at, next_frame, expected in ((10**6, 13, True), (10**6, 16, False), (0, 13, True)):
+        rp = RepeatPipeline(taught.teach_map, _repeat_config("fused", search_accept_inliers=accept_at))
+        a = rp._localize_step(0, first, feats[12], camera, None)
+        assert a.searched_map and a.localized == (accept_at == 0) and rp.held_places == (accept_at != 0), a
+        if accept_at == 0:  # strong enough at once: nothing held, the next frame tracks locally
+            rp.close()
+            continue
+        b = rp._localize_step(STAMP_STEP_NS, step, feats[next_frame], camera, None)
+        assert b.searched_map and b.localized == expected and b.relocalized == expected, (next_frame, b)
+        assert rp.held_places == (1 if expected else 2)
+        if expected:
+            kf_z = taught.kf_pose[b.keyframe_index][2, 3]
+            assert abs(kf_z + b.T_kf_cam[2, 3] - REPEAT_Z[13]) < 0.1
+        rp.close()
+
+
 def test_repeat_step_on_images_and_mcmanus_lazy_sources(taught: Taught, scene: Scene):
     """The node-facing call (images in) in every mode; mcmanus computes F_v/F_r only when grey fails."""
     rng = np.random.default_rng(30)
