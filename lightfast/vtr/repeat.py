@@ -18,10 +18,9 @@ their ``camera_info`` projection matrices in, :class:`RepeatResult` out):
 5. **Failure handling** (§IV-C): without success the VO prior is the pose and the distance driven on VO alone
    accumulates; beyond ``max_distance_on_vo_m`` (20 m) it is a **localization failure**: the robot "stops" and the
    whole map is searched (:mod:`lightfast.vtr.map_search`) every frame until a place has the evidence that rules
-   out look-alikes (``search_min_inliers``, ``search_margin``, and below ``search_accept_inliers`` the next
-   frame's search finding it again; ``relocalized``). Before
-   the first localization the pipeline is in the same state ("the map is searched until the live stereo feed
-   localizes"); with ``initial_keyframe`` only the window around that keyframe is tried until the failure distance.
+   out look-alikes (``search_min_inliers``, ``search_margin``, and below ``search_accept_inliers`` the next frame's
+   search finding it again; ``relocalized``). Before the first localization likewise ("the map is searched until the
+   live stereo feed localizes"); with ``initial_keyframe`` its window is tried until the failure distance.
 
 Output per frame: :class:`RepeatResult` — ``T_kf_cam`` (the camera in the frame of keyframe ``keyframe_index``, the one
 nearest along the path; metres, REP-103 optical axes), whether this frame localized, inliers per source, the distance
