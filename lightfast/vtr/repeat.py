@@ -318,11 +318,15 @@ class RepeatPipeline:
         c = self.config
         if loc.inliers >= c.search_accept_inliers:
             return True
-        if held is None:
-            return False
-        ref, T_ref_cam = held
+        return held is not None and self._offset_m(loc, held, motion) <= c.search_agree_m
+
+    def _offset_m(self, loc: Localization, previous: tuple[int, NDArray[np.float64]],
+                  motion: NDArray[np.float64]) -> float:
+        """Distance (m) between ``loc``'s camera and the previous frame's place ``(keyframe, T_ref_cam)`` moved by the
+        VO ``motion`` between the frames."""
+        ref, T_ref_cam = previous
         expected = self.map.T_a_b(loc.ref_index, ref) @ T_ref_cam @ motion
-        return float(np.linalg.norm(loc.T_ref_cam[:3, 3] - expected[:3, 3])) <= c.search_agree_m
+        return float(np.linalg.norm(loc.T_ref_cam[:3, 3] - expected[:3, 3]))
 
     def _strong_beyond_gate(self, loc: Localization) -> bool:
         """Rejected by the prior gate only, with ``confirm_beyond_gate_inliers`` (> 0) inliers."""
@@ -333,9 +337,7 @@ class RepeatPipeline:
         the VO ``motion`` between them."""
         if self._gated is None or not self._strong_beyond_gate(loc):
             return False
-        ref, T_ref_cam = self._gated
-        expected = self.map.T_a_b(loc.ref_index, ref) @ T_ref_cam @ motion
-        agree = float(np.linalg.norm(loc.T_ref_cam[:3, 3] - expected[:3, 3])) <= self.config.prior_gate_m
+        agree = self._offset_m(loc, self._gated, motion) <= self.config.prior_gate_m
         if agree:
             log.info("localization at keyframe %d beyond the prior gate confirmed by the previous frame's: the VO "
                      "prior was off", loc.ref_index)
