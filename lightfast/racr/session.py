@@ -17,16 +17,16 @@ and publishes what it returns.
 3. **The scheme (§3.3–3.6):** a :class:`~lightfast.racr.scheme.RacrScheme` with X, started with its alignment
    thread, and the first observation taken after the last initialization motion (the fast alignment's start guess
    puts that camera at the reference pose); every VSE input is scaled by ``s`` (§3.3: ``P = s · P_VSE``,
-   ``t_A = s · t_VSE``, keyframe translations alike) before it is handed on, and the platform stops are passed as
-   ``moving=False`` poses. Hand motions then come from :meth:`RacrScheme.next_hand_motion` until it reports
-   convergence (``g ≤ η``); the session then checks itself (:mod:`lightfast.racr.verification`: stage ``failed``
-   or ``ambiguous`` instead of ``converged``) and the run is over: no further motion is issued.
+   ``t_A = s · t_VSE``, keyframe translations alike) before it is handed on; platform stops are ``moving=False``
+   poses. Hand motions come from :meth:`RacrScheme.next_hand_motion` until it reports convergence (``g ≤ η``).
+4. **The self-check** (:mod:`lightfast.racr.verification`, not in the paper): the estimate is checked against the
+   reference image; a failed check with a correction ``δ`` (where the image puts the camera) moves the camera by
+   it (``kind`` ``correction``, stage ``correcting``) and checks again, up to ``corrections`` times. Then the run
+   is over (``converged``, ``failed`` or ``ambiguous``): no further motion is issued.
 
-Time: stamps are seconds on the injected ``clock`` (the node's ROS clock, which also stamps the VSE's and the
-platform's messages). A command is issued at ``clock()``; its stop must be stamped at or after that and the next
-VSE pose used must be newer than the stop: no motion is computed from a camera pose taken before it stopped.
-No simulator truth is read (inputs: VSE output, reported hand poses, the reference observation). Bad input raises
-:class:`~lightfast.racr.errors.RacrError` subclasses at the call; :attr:`RacrSession.status` says what it waits for.
+Time: stamps are seconds on the injected ``clock`` (the node's ROS clock). A command is issued at ``clock()``; no
+motion is computed from a camera pose taken before its stop. No simulator truth is read. Bad input raises
+:class:`~lightfast.racr.errors.RacrError` subclasses; :attr:`RacrSession.status` says what it waits for.
 """
 from __future__ import annotations
 
@@ -43,7 +43,14 @@ from numpy.typing import ArrayLike, NDArray
 from lightfast.camera import PinholeCamera
 from lightfast.config import Config, ConfigError, param
 from lightfast.geometry import make_transform, rotation_angle_deg, so3_exp
-from lightfast.racr.adjustment import AdjustmentConfig, _inverse, _rigid, camera_pose_in_reference
+from lightfast.racr.adjustment import (
+    AdjustmentConfig,
+    _hand_motion,
+    _inverse,
+    _rigid,
+    camera_pose_in_reference,
+    motion_gap,
+)
 from lightfast.racr.alignment_job import finite_vse_cloud
 from lightfast.racr.errors import InitializationError, RacrError
 from lightfast.racr.fast_alignment import FastAlignmentConfig, ReferenceCloud
@@ -75,7 +82,8 @@ Array = NDArray[np.float64]
 HAND_AXES = {"x": (1.0, 0.0, 0.0), "y": (0.0, 1.0, 0.0), "z": (0.0, 0.0, 1.0)}
 #: Stages before the scheme runs; after that the stage is the scheme's (``SCHEME_STAGES``: aligning, ready,
 #: moving, converged, platform_timeout, failed).
-SESSION_STAGES = ("waiting_for_platform", "waiting_for_vse", "initializing", "initialization_failed", "ambiguous")
+SESSION_STAGES = ("waiting_for_platform", "waiting_for_vse", "initializing", "initialization_failed", "correcting",
+                  "ambiguous")
 
 
 @dataclass(frozen=True)
@@ -258,6 +266,13 @@ class RacrSession:
         self._init_error: str | None = None
         self._scheme: RacrScheme | None = None
         self._converged = False
+        # the self-check's corrections (module docstring, 4.): the estimate at the scheme's convergence
+        # (T_ref_cur, σ_p), the correction δ applied to it so far, the correction motion awaiting its stop, the stop
+        self._final: tuple[Array, float] | None = None
+        self._delta = np.eye(4)
+        self._corrections = 0
+        self._correction_issued: float | None = None
+        self._correction_stop: float | None = None
 
     # ------------------------------------------------------------------ lifecycle
     def stop(self, timeout: float | None = 30.0) -> None:
@@ -335,6 +350,9 @@ class RacrSession:
                 self._pending = None
                 self._last_stop = t
                 self._after_hand = T
+            if self._correction_issued is not None and t >= self._correction_issued:
+                self._correction_issued = None
+                self._correction_stop = t
         if scheme is not None:
             scheme.add_platform_pose(T, moving=False, stamp=t)
 
@@ -354,17 +372,24 @@ class RacrSession:
                 return self._next_initialization_motion()
             if self._converged:
                 return None  # relocalized: the run is over
+            correcting = self._final is not None
+            if correcting and not self._correction_ended():
+                return None
+        if correcting:  # the check again, after a correction motion (outside the lock: it matches images)
+            verification = self._verify()
+            with self._lock:
+                return self._conclude(verification, None)
         step = scheme.next_hand_motion()
         if step is None:
             return None
         if step.converged:
+            st = scheme.status
+            with self._lock:
+                if st.T_ref_cur is not None and st.sigma is not None:
+                    self._final = (st.T_ref_cur, st.sigma)
             verification = self._verify()
             with self._lock:
-                self._converged = True
-                self.verification = verification
-            logger.info("rACR converged: g=%.3g%s", step.g, "" if verification is None else
-                        f"; {verification.describe()}")
-            return None
+                return self._conclude(verification, step.g)
         with self._lock:
             self._motions_issued += 1
             return MotionCommand(step.M_hand.copy(), "adjustment", self._motions_issued, self._clock(), step.g,
@@ -421,30 +446,63 @@ class RacrSession:
         if self._vse_pose is not None and (obs is None or self._vse_pose[1] > obs.stamp):
             scheme.add_vse_pose(_scaled_pose(self._vse_pose[0], result.scale_m_per_vse), stamp=self._vse_pose[1])
 
+    # ------------------------------------------------------------------ self-check (module docstring, 4.)
+    def _camera_in_reference(self, T_vse_cam: Array) -> Array:
+        """A VSE pose (VSE units) in the reference frame by the final estimate and the corrections so far."""
+        assert self._final is not None and self._scale is not None
+        T_ref_cur, sigma = self._final
+        return self._delta @ camera_pose_in_reference(_scaled_pose(T_vse_cam, self._scale), T_ref_cur, sigma)
+
     def _verify(self) -> Verification | None:
-        """The self-check of a convergence (:mod:`lightfast.racr.verification`) on the latest observation's
-        keyframes, placed in the reference frame by the estimate; None without a reference image."""
-        with self._lock:
-            obs, scheme, s = self._observation, self._scheme, self._scale
-        if self._view is None or obs is None or scheme is None or s is None:
+        """The self-check of the final estimate (:mod:`lightfast.racr.verification`) on the latest observation's
+        keyframes, placed in the reference frame by it; None without a reference image."""
+        obs, s = self._observation, self._scale
+        if self._view is None or obs is None or s is None or self._final is None:
             return None
-        st = scheme.status
-        if st.T_ref_cur is None or st.sigma is None:
-            return None
-        kfs = [(k.image, camera_pose_in_reference(_scaled_pose(np.array(k.T_cur_cam), s), st.T_ref_cur, st.sigma),
-                k.camera) for k in obs.keyframes]
+        kfs = [(k.image, self._camera_in_reference(np.array(k.T_cur_cam)), k.camera) for k in obs.keyframes]
         result = verify(self._view, kfs)
-        if result.verdict != "ambiguous":
-            return result
+        if result.verdict != "ambiguous" or self._corrections > 0:
+            return result  # after a correction the geometry's fit is not the estimate any more: it cannot tell
         # the image cannot tell (a strong lighting change): is the geometric fit the best around the estimate?
-        T_ref_cam = camera_pose_in_reference(_scaled_pose(obs.T_vse_cam, s), st.T_ref_cur, st.sigma)
+        T_ref_cur, sigma = self._final
         try:
-            restarts = restart_fits(obs.points * s, self._reference, st.T_ref_cur, st.sigma, T_ref_cam, self._view,
-                                    self.fast_config)
+            restarts = restart_fits(obs.points * s, self._reference, T_ref_cur, sigma,
+                                    self._camera_in_reference(obs.T_vse_cam), self._view, self.fast_config)
         except RacrError as exc:
             logger.info("restarts around the estimate failed: %s", exc)
             return result
         return replace(result, verdict=restarts.verdict, restarts=restarts)
+
+    def _conclude(self, verification: Verification | None, g: float | None) -> MotionCommand | None:
+        """After a check (lock held): a correction motion when the check failed with a correction and some are
+        left, else the end of the run with this verdict."""
+        cfg = self.verification_config
+        if verification is not None and verification.verdict == "failed" and \
+                verification.T_correction is not None and self._corrections < cfg.corrections and \
+                self._observation is not None and self._hand_eye is not None:
+            T_ref_cam = verification.T_correction @ self._camera_in_reference(self._observation.T_vse_cam)
+            M = _hand_motion(T_ref_cam, self._T_ref_camref, self._hand_eye.T_cam_hand)
+            self._delta = verification.T_correction @ self._delta
+            self._corrections += 1
+            self.verification = verification
+            now = self._clock()
+            self._correction_issued, self._correction_stop = now, None
+            self._motions_issued += 1
+            logger.info("rACR self-check failed (%s): correction %d of %d", verification.describe(),
+                        self._corrections, cfg.corrections)
+            return MotionCommand(M, "correction", self._motions_issued, now, motion_gap(M), T_ref_cam)
+        if verification is not None and self._corrections > 0:
+            verification = replace(verification, corrections=self._corrections)
+        self._converged = True
+        self.verification = verification
+        logger.info("rACR converged%s%s", "" if g is None else f": g={g:.3g}",
+                    "" if verification is None else f"; {verification.describe()}")
+        return None
+
+    def _correction_ended(self) -> bool:
+        """(lock held) The correction motion has stopped and an observation taken after the stop has arrived."""
+        obs, stop = self._observation, self._correction_stop
+        return self._correction_issued is None and stop is not None and obs is not None and obs.stamp > stop
 
     def _hand_eye_result(self, result: HandEyeResult) -> HandEyeResult:
         """The initialization's result as the scheme gets it: unchanged here; a study of the method's sensitivity
@@ -517,6 +575,10 @@ class RacrSession:
         done = len(self._pairs_A)
         timeout = self.scheme_config.platform_timeout_s
         v = self.verification
+        if self._final is not None and not self._converged and v is not None:
+            moving = "moving" if self._correction_issued is not None else "checking again"
+            return "correcting", "warn", (f"converged to a wrong pose ({v.describe()}): correction {self._corrections}"
+                                          f" of {self.verification_config.corrections} {moving}")
         if sst is not None and sst.stage == "converged" and v is not None and v.verdict != "verified":
             g = "" if sst.g is None else f" (g={sst.g:.3g} after {sst.adjustments} adjustments)"
             if v.verdict == "failed":

@@ -20,13 +20,14 @@ period), and g ≤ η then holds at the wrong place. The checks use evidence the
    more than ``agree_px`` in the reference image is another fit: clearly better (fitness ×1/``basin_fitness_ratio``)
    ``failed``, comparable ``ambiguous``, none ``verified`` by the geometry.
 
-Inputs: the reference cloud (metres, reference frame), its camera and pose, the reference image; keyframes as (image in
-[0, 1], ``T_ref_cam`` in metres, camera).
+A ``failed`` check carries the correction ``δ`` the image gives (the matches' pose or the shift read as a slide),
+which the session moves the camera by before checking again (``corrections``). Inputs: the reference cloud (metres,
+reference frame), its camera and pose, the reference image; keyframes (image in [0, 1], ``T_ref_cam`` m, camera).
 """
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import cv2
 import numpy as np
@@ -81,6 +82,10 @@ class VerificationConfig(Config):
                                        "fitness is at least this share of the estimate's (ambiguous), and a better "
                                        "fit when the estimate's is at most this share of its (failed).", min=0.01,
                                        max=1.0)
+    corrections: int = param(2, description="After a failed check, the camera is moved where the reference image "
+                             "puts it (the check's correction: the matches' pose or the image shift) and checked "
+                             "again, at most this many times; verified then, the run converged (0: a failed check "
+                             "ends the run).", min=0, max=10)
 
     def check(self) -> None:
         if self.verify_px > self.agree_px:
@@ -136,8 +141,17 @@ class Verification:
     disagreement_px: float = float("nan")
     shift: ImageShift | None = None
     restarts: Restarts | None = None
+    #: for a ``failed`` image check: the correction ``δ`` (4×4, reference frame) the image gives, ``δ · T_ref_cam``
+    #: being where the image puts a camera the estimate puts at ``T_ref_cam`` (None otherwise)
+    T_correction: Array | None = field(default=None, compare=False)
+    #: correction motions made before this check (the session's; 0: the check of the alignment's own convergence)
+    corrections: int = 0
 
     def describe(self) -> str:
+        text = self._describe()
+        return text if self.corrections == 0 else f"{text} (after {self.corrections} correction motions)"
+
+    def _describe(self) -> str:
         r = self.restarts
         image = f"the reference image could not tell: {self.agreeing} of {self.matches} matches agree"
         if r is not None and self.verdict == "verified":
@@ -196,6 +210,7 @@ def verify(view: ReferenceView, keyframes: Sequence[tuple[ArrayLike, ArrayLike, 
     cfg = view.config
     matches = agreeing = best_other = 0
     disagreement = float("nan")
+    correction: Array | None = None
     matched: list[_Matches] = []
     for image, T_ref_cam, cam in keyframes:
         p_kf, p_ref = sift_matches(image, view.image, AcrConfig())
@@ -222,16 +237,18 @@ def verify(view: ReferenceView, keyframes: Sequence[tuple[ArrayLike, ArrayLike, 
         uv_other = uv_other[:, :2] / uv_other[:, 2:3]
         moved = float(np.mean(np.linalg.norm(uv_other - np.where(front[idx, None], uv[idx], np.inf), axis=1)))
         best_other, disagreement = len(idx), moved
+        # the PnP pose of this keyframe, T_cam_ref, is the estimate's corrected by δ: T_cam_ref δ⁻¹
+        correction = inverse(make_transform(R, tvec.ravel())) @ m.T_cam_ref
     if agreeing >= cfg.min_agreeing:
         return Verification("verified", matches, agreeing, best_other, disagreement)
-    support, moved = _corrected_pose(view, matched)
+    support, moved, pooled = _corrected_pose(view, matched)
     if support > max(best_other, agreeing):
-        best_other, disagreement = support, moved
+        best_other, disagreement, correction = support, moved, pooled
     if best_other >= cfg.min_other_pose and disagreement > cfg.agree_px:
-        return Verification("failed", matches, agreeing, best_other, disagreement)
+        return Verification("failed", matches, agreeing, best_other, disagreement, T_correction=correction)
     shift = image_shift(view, keyframes)
     if shift.agreeing >= cfg.shift_min_keyframes and shift.norm_px > cfg.agree_px:
-        return Verification("failed", matches, agreeing, 0, shift=shift)
+        return Verification("failed", matches, agreeing, 0, shift=shift, T_correction=_shift_correction(view, shift))
     return Verification("ambiguous", matches, agreeing, best_other, disagreement, shift=shift)
 
 
@@ -246,16 +263,16 @@ class _Matches:
     camera: PinholeCamera
 
 
-def _corrected_pose(view: ReferenceView, matched: Sequence[_Matches]) -> tuple[int, float]:
+def _corrected_pose(view: ReferenceView, matched: Sequence[_Matches]) -> tuple[int, float, Array | None]:
     """The pose the matches of all keyframes together put the estimate at, near it: one rigid correction ``δ`` of
     the reference frame (every keyframe's pose is the estimate's, so they share its error), ``T_cam_ref δ⁻¹``,
     fitted by robust least squares (Cauchy at ``agree_px``, then at ``verify_px``) from the identity. Returns the
-    matches within ``verify_px`` at the corrected pose and the mean displacement (px) of those features between
-    the estimate's and the corrected pose's projections ((0, NaN) without matches). Unlike a PnP per keyframe it
-    pools the keyframes' matches, which alone are too few (an estimate a few cm off along a facade)."""
+    matches within ``verify_px`` at the corrected pose, the mean displacement (px) of those features between
+    the estimate's and the corrected pose's projections and ``δ`` ((0, NaN, None) without matches). Unlike a PnP per
+    keyframe it pools the keyframes' matches, which alone are too few (an estimate a few cm off along a facade)."""
     cfg = view.config
     if sum(len(m.p_kf) for m in matched) < cfg.min_agreeing:
-        return 0, float("nan")
+        return 0, float("nan"), None
     T_ref_camref = view.T_ref_camref
     T_camref_ref = inverse(T_ref_camref)
 
@@ -280,8 +297,23 @@ def _corrected_pose(view: ReferenceView, matched: Sequence[_Matches]) -> tuple[i
     p_kf = np.concatenate([m.p_kf for m in matched])
     inlier = np.linalg.norm(uv_fit - p_kf, axis=1) <= cfg.verify_px
     if not inlier.any():
-        return 0, float("nan")
-    return int(np.count_nonzero(inlier)), float(np.mean(np.linalg.norm(uv_fit[inlier] - uv_est[inlier], axis=1)))
+        return 0, float("nan"), None
+    delta = T_ref_camref @ make_transform(np.eye(3), xi[3:]) @ make_transform(so3_exp(xi[:3]), np.zeros(3)) \
+        @ T_camref_ref
+    return (int(np.count_nonzero(inlier)), float(np.mean(np.linalg.norm(uv_fit[inlier] - uv_est[inlier], axis=1))),
+            delta)
+
+
+def _shift_correction(view: ReferenceView, shift: ImageShift) -> Array:
+    """The correction ``δ`` an image shift gives: a translation across the reference view that moves the scene at
+    the reference's median depth by the shift (a slide along the relief, the geometric alignment's failure; the
+    image alone cannot tell it from a rotation, which the alignment of a relief constrains well)."""
+    finite = np.isfinite(view.depth_m)
+    depth = float(np.median(view.depth_m[finite])) if finite.any() else 1.0
+    dx, dy = shift.shift_px
+    # the camera slid opposite to the keyframes' content (sign checked by test_a_failed_check_gives_the_correction)
+    t_camref = -depth * np.array([dx / view.camera.fx, dy / view.camera.fy, 0.0])
+    return view.T_ref_camref @ make_transform(np.eye(3), t_camref) @ inverse(view.T_ref_camref)
 
 
 def _gradient_magnitude(image: ArrayLike) -> NDArray[np.float32]:

@@ -180,7 +180,7 @@ def _run_racr(scene: Any, devices: _Devices, node: RacrNodeConfig, config: RacrE
         if arrival is None:
             cmd = racr.next_hand_motion()
             if cmd is not None:
-                if cmd.kind == "adjustment" and record.adjustments >= config.max_adjustments:
+                if cmd.kind != "initialization" and record.adjustments >= config.max_adjustments:
                     reason = "adjustment limit"
                     break
                 try:
@@ -188,7 +188,7 @@ def _run_racr(scene: Any, devices: _Devices, node: RacrNodeConfig, config: RacrE
                 except PlatformError as exc:
                     reason = f"platform refused the motion: {exc}"
                     break
-                if cmd.kind == "adjustment":
+                if cmd.kind != "initialization":  # an adjustment, or a correction of the self-check
                     record.adjustments += 1
                     record.trace.append(TracePoint(record.adjustments, arrival - record.time_init_s,
                                                    *_errors(scene, plat.true_camera_pose), g=cmd.g or math.nan))
@@ -237,6 +237,7 @@ def _run_racr(scene: Any, devices: _Devices, node: RacrNodeConfig, config: RacrE
         record.details["verification"] = {
             "verdict": v.verdict, "matches": v.matches, "agreeing": v.agreeing,
             "other_pose_inliers": v.other_pose_inliers, "disagreement_px": v.disagreement_px,
+            "corrections": v.corrections,
             "shift": None if v.shift is None else asdict(v.shift),
             "restarts": None if v.restarts is None else asdict(v.restarts)}
 
