@@ -7,9 +7,10 @@ period), and g ≤ η then holds at the wrong place. The checks use evidence the
 1. SIFT matches between the reference image and the current VSE keyframes (:func:`verify`): each reference keypoint
    is lifted to 3-D with the reference cloud (the nearest projected point within ``depth_radius_px``) and projected
    into the keyframe with the estimate (``T_ref_cam = T_p ⟨R_A, σ_p s t_A⟩``, Eq. 2–3); it *agrees* within
-   ``verify_px`` (keypoint noise). ``min_agreeing`` agreeing matches verify; a pose elsewhere that moves the
-   keypoints by more than ``agree_px`` with ``min_other_pose`` matches within ``verify_px`` makes the convergence
-   ``failed``: a PnP RANSAC per keyframe, or one correction of the estimate fitted to all keyframes' matches.
+   ``verify_px`` (keypoint noise). ``min_agreeing`` agreeing matches verify, unless one correction of the estimate
+   fitted to all keyframes' matches has more of them within ``verify_px`` and moves them beyond it (a near miss:
+   ``failed``). Without enough agreeing matches, ``min_other_pose`` matches within ``verify_px`` of a pose that moves
+   them beyond ``agree_px`` (that fit, or a PnP RANSAC per keyframe) make the convergence ``failed``.
 2. The image as a whole, when matches cannot tell (:func:`image_shift`): each keyframe is warped into the reference
    view by the estimate (the homography of the plane at the reference's median depth) and its gradient magnitude
    (edges of the relief stay edges whichever side the light comes from) is phase-correlated with the reference's.
@@ -20,9 +21,10 @@ period), and g ≤ η then holds at the wrong place. The checks use evidence the
    more than ``agree_px`` in the reference image is another fit: clearly better (fitness ×1/``basin_fitness_ratio``)
    ``failed``, comparable ``ambiguous``, none ``verified`` by the geometry.
 
-A ``failed`` check carries the correction ``δ`` the image gives (the matches' pose or the shift read as a slide),
-which the session moves the camera by before checking again (``corrections``). Inputs: the reference cloud (metres,
-reference frame), its camera and pose, the reference image; keyframes (image in [0, 1], ``T_ref_cam`` m, camera).
+A ``failed`` check carries the correction ``δ`` the image gives, which the session moves the camera by before
+checking again (``corrections``): the matches' pose, or after a shift the dense flow of the gradient magnitudes
+(:func:`_image_correction`). Inputs: the reference cloud (m, reference frame), its camera and pose, the reference
+image; keyframes (image in [0, 1], ``T_ref_cam`` m, camera).
 """
 from __future__ import annotations
 
@@ -239,16 +241,21 @@ def verify(view: ReferenceView, keyframes: Sequence[tuple[ArrayLike, ArrayLike, 
         best_other, disagreement = len(idx), moved
         # the PnP pose of this keyframe, T_cam_ref, is the estimate's corrected by δ: T_cam_ref δ⁻¹
         correction = inverse(make_transform(R, tvec.ravel())) @ m.T_cam_ref
-    if agreeing >= cfg.min_agreeing:
-        return Verification("verified", matches, agreeing, best_other, disagreement)
     support, moved, pooled = _corrected_pose(view, matched)
+    if agreeing >= cfg.min_agreeing:
+        if support >= cfg.min_other_pose and support > agreeing and moved > cfg.verify_px:
+            # a few right matches land within verify_px of a near miss: the matches put the camera elsewhere
+            return Verification("failed", matches, agreeing, support, moved, T_correction=pooled)
+        return Verification("verified", matches, agreeing, best_other, disagreement)
     if support > max(best_other, agreeing):
         best_other, disagreement, correction = support, moved, pooled
     if best_other >= cfg.min_other_pose and disagreement > cfg.agree_px:
         return Verification("failed", matches, agreeing, best_other, disagreement, T_correction=correction)
     shift = image_shift(view, keyframes)
     if shift.agreeing >= cfg.shift_min_keyframes and shift.norm_px > cfg.agree_px:
-        return Verification("failed", matches, agreeing, 0, shift=shift, T_correction=_shift_correction(view, shift))
+        correction = _image_correction(view, keyframes, shift)
+        return Verification("failed", matches, agreeing, 0, shift=shift,
+                            T_correction=_shift_correction(view, shift) if correction is None else correction)
     return Verification("ambiguous", matches, agreeing, best_other, disagreement, shift=shift)
 
 
@@ -308,12 +315,72 @@ def _shift_correction(view: ReferenceView, shift: ImageShift) -> Array:
     """The correction ``δ`` an image shift gives: a translation across the reference view that moves the scene at
     the reference's median depth by the shift (a slide along the relief, the geometric alignment's failure; the
     image alone cannot tell it from a rotation, which the alignment of a relief constrains well)."""
-    finite = np.isfinite(view.depth_m)
-    depth = float(np.median(view.depth_m[finite])) if finite.any() else 1.0
+    depth = _median_depth(view)
     dx, dy = shift.shift_px
     # the camera slid opposite to the keyframes' content (sign checked by test_a_failed_check_gives_the_correction)
     t_camref = -depth * np.array([dx / view.camera.fx, dy / view.camera.fy, 0.0])
     return view.T_ref_camref @ make_transform(np.eye(3), t_camref) @ inverse(view.T_ref_camref)
+
+
+def _image_correction(view: ReferenceView, keyframes: Sequence[tuple[ArrayLike, ArrayLike, PinholeCamera]],
+                      shift: ImageShift) -> Array | None:
+    """The correction ``δ`` the images give when their matches are too few (a strong lighting change): each keyframe
+    warped into the reference view by the estimate (:func:`image_shift`) and the shift, the dense optical flow
+    (Farnebäck) of the gradient magnitudes from the reference to it gives, at reference pixels on edges with a
+    depth, the keyframe pixel of their content (the warp is a change of pixel grid: parallax is kept); then one
+    correction of the estimate fitted to all keyframes' pixels (:func:`_corrected_pose`). Unlike the shift alone it
+    sees rotation and depth. None without pixels."""
+    ref = _gradient_magnitude(view.image)
+    h, w = ref.shape
+    step = 4
+    v, u = np.mgrid[step // 2:h:step, step // 2:w:step]
+    u, v = u.ravel(), v.ravel()
+    keep = np.isfinite(view.depth_m[v, u]) & (ref[v, u] > np.median(ref))  # on the relief's edges, with a depth
+    uv_ref = np.c_[u[keep], v[keep]].astype(np.float64)
+    X_ref, _ = view.lift(uv_ref)
+    to_u8 = 255.0 / max(float(np.percentile(ref, 99)), 1e-6)
+    grads = [_gradient_magnitude(image) for image, _, _ in keyframes]
+    delta = np.eye(4)
+    for it in range(3):  # the flow is exact near zero: re-warp by the correction so far
+        # the first round starts from the shift, the later ones from the correction so far
+        s_px = shift.shift_px if it == 0 else (0.0, 0.0)
+        found = _flow_correspondences(view, keyframes, grads, delta, s_px, ref, uv_ref, X_ref, to_u8)
+        if not found:
+            return None if it == 0 else delta
+        step_delta = _corrected_pose(view, found)[2]
+        if step_delta is None:
+            return None if it == 0 else delta
+        delta = step_delta @ delta
+    return delta
+
+
+
+def _flow_correspondences(view: ReferenceView, keyframes: Sequence[tuple[ArrayLike, ArrayLike, PinholeCamera]],
+                          grads: Sequence[NDArray[np.float32]], delta: Array, shift_px: tuple[float, float],
+                          ref: NDArray[np.float32], uv_ref: Array, X_ref: Array, to_u8: float) -> list[_Matches]:
+    h, w = ref.shape
+    u, v = np.rint(uv_ref[:, 0]).astype(np.intp), np.rint(uv_ref[:, 1]).astype(np.intp)
+    matched = []
+    for (_, T_ref_cam_est, cam), kf in zip(keyframes, grads, strict=True):
+        T_ref_cam = delta @ np.asarray(T_ref_cam_est, np.float64)
+        # warped(y) = keyframe(H y), H the plane homography after the shift (the phase correlation's shift s:
+        # warped by the plane alone, the keyframe's content at y + s is the reference's at y): content at y is at H y
+        H = _plane_homography(view, T_ref_cam, cam) @ np.array([[1.0, 0.0, shift_px[0]], [0.0, 1.0, shift_px[1]],
+                                                                 [0.0, 0.0, 1.0]])
+        warped = cv2.warpPerspective(kf, H, (w, h), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP)
+        reach = cv2.warpPerspective(np.ones_like(kf), H, (w, h), flags=cv2.INTER_NEAREST | cv2.WARP_INVERSE_MAP)
+        flow = cv2.calcOpticalFlowFarneback(np.clip(ref * to_u8, 0, 255).astype(np.uint8),
+                                            np.clip(warped * to_u8, 0, 255).astype(np.uint8),
+                                            np.zeros((h, w, 2), np.float32), 0.5, 3, 21, 5,
+                                            7, 1.5, 0)
+        y = uv_ref + flow[v, u].astype(np.float64)
+        yi = np.rint(y).astype(np.intp)
+        ok = (yi[:, 0] >= 0) & (yi[:, 0] < w) & (yi[:, 1] >= 0) & (yi[:, 1] < h) & (reach[v, u] > 0)
+        ok[ok] &= reach[yi[ok, 1], yi[ok, 0]] > 0
+        p = np.c_[y[ok], np.ones(int(ok.sum()))] @ H.T
+        if len(p) >= view.config.min_other_pose:
+            matched.append(_Matches(p[:, :2] / p[:, 2:3], X_ref[ok], inverse(T_ref_cam), cam))
+    return matched
 
 
 def _gradient_magnitude(image: ArrayLike) -> NDArray[np.float32]:
@@ -321,6 +388,19 @@ def _gradient_magnitude(image: ArrayLike) -> NDArray[np.float32]:
     g = cv2.GaussianBlur(img.mean(axis=2) if img.ndim == 3 else img, (0, 0), 1.0)
     m = np.hypot(cv2.Sobel(g, cv2.CV_32F, 1, 0), cv2.Sobel(g, cv2.CV_32F, 0, 1))
     return (m / max(float(m.mean()), 1e-12)).astype(np.float32)
+
+
+def _median_depth(view: ReferenceView) -> float:
+    finite = np.isfinite(view.depth_m)
+    return float(np.median(view.depth_m[finite])) if finite.any() else 1.0
+
+
+def _plane_homography(view: ReferenceView, T_ref_cam: ArrayLike, cam: PinholeCamera) -> Array:
+    """Reference pixels -> keyframe pixels through the plane at the reference's median depth (facing the reference
+    camera), the keyframe placed at ``T_ref_cam``."""
+    T = inverse(np.asarray(T_ref_cam, dtype=np.float64)) @ view.T_ref_camref  # reference camera -> keyframe
+    return cam.K @ (T[:3, :3] + np.outer(T[:3, 3], [0.0, 0.0, 1.0 / _median_depth(view)])) @ np.linalg.inv(
+        view.camera.K)
 
 
 def image_shift(view: ReferenceView, keyframes: Sequence[tuple[ArrayLike, ArrayLike, PinholeCamera]]) -> ImageShift:
@@ -332,13 +412,9 @@ def image_shift(view: ReferenceView, keyframes: Sequence[tuple[ArrayLike, ArrayL
     ref = _gradient_magnitude(view.image)
     h, w = ref.shape
     window = cv2.createHanningWindow((w, h), cv2.CV_32F)
-    finite = np.isfinite(view.depth_m)
-    depth = float(np.median(view.depth_m[finite])) if finite.any() else 1.0
-    K_ref_inv = np.linalg.inv(view.camera.K)
     shifts = []
     for image, T_ref_cam, cam in keyframes:
-        T = inverse(np.asarray(T_ref_cam, dtype=np.float64)) @ view.T_ref_camref  # reference camera -> keyframe
-        H = cam.K @ (T[:3, :3] + np.outer(T[:3, 3], [0.0, 0.0, 1.0 / depth])) @ K_ref_inv
+        H = _plane_homography(view, T_ref_cam, cam)
         kf = _gradient_magnitude(image)
         flags = cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP
         warped = cv2.warpPerspective(kf, H, (w, h), flags=flags)

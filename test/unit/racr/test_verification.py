@@ -135,24 +135,46 @@ def test_restarts_find_the_look_alike_of_a_repetitive_relief() -> None:
             assert np.isnan(r.look_alike_px) and np.isnan(r.better_px) and r.verdict == "verified", r
 
 
+def _image_error_px(scene, T_ref_cam, T_ref_cam_true) -> float:
+    """Median displacement (px) of the reference cloud's points between two camera poses."""
+    from lightfast.geometry import inverse, transform_points
+
+    pts = scene.reference.points_m[::7].astype(np.float64)
+    a, _ = scene.camera.project(transform_points(inverse(T_ref_cam), pts))
+    b, _ = scene.camera.project(transform_points(inverse(T_ref_cam_true), pts))
+    return float(np.nanmedian(np.linalg.norm(a - b, axis=1)))
+
+
+PLANTS = {"slide": ([0.0, 0.0, 0.0], [0.03, 0.0, 0.0]),  # 3 cm along the view: about 13 px
+          "turn": ([0.005, 0.0, 0.01], [0.0, 0.01, 0.02])}  # 0.6 deg about x and z, 2 cm deeper: about 4 px
+
+
 @pytest.mark.parametrize("lighting", ["similar", "varied"])
-def test_a_failed_check_gives_the_correction(scene, lighting) -> None:
-    """A failed check says where the image puts the camera: ``δ`` applied to the slid estimate lands near the true
-    pose (by the matches under similar lighting, by the image shift under the grazing side light, whose matches are
-    too few), and so much nearer than the slide (3 cm) that a correction motion can mend the convergence."""
+@pytest.mark.parametrize("plant", sorted(PLANTS))
+def test_a_failed_check_gives_the_correction(scene, lighting, plant) -> None:
+    """A failed check says where the image puts the camera: ``δ`` applied to the planted estimate lands within 1 px
+    (reference points in the image) of the true pose: by the matches under similar lighting; by the dense flow of
+    the gradient magnitudes under the grazing side light, whose matches are too few. The image shift alone, read as a
+    slide, mends a slide but not a turn."""
+    from lightfast.geometry import so3_exp
+    from lightfast.racr.verification import _shift_correction
+
     ref = scene.reference
     view = ReferenceView(ref.points_m, ref.T_ref_camref, ref.image, ref.camera)
     kfs = [_keyframe(scene, o, lighting) for o in ([0.0, 0.0, 0.0], [0.02, 0.0, 0.0], [-0.02, 0.01, 0.0])]
-    slide = make_transform(np.eye(3), [0.03, 0.0, 0.0])
-    wrong = verify(view, [(img, T @ slide, scene.camera) for img, T in kfs])
+    rot, t = PLANTS[plant]
+    wrong_pose = make_transform(so3_exp(rot), t)
+    wrong = verify(view, [(img, T @ wrong_pose, scene.camera) for img, T in kfs])
     assert wrong.verdict == "failed" and wrong.T_correction is not None, wrong
     assert (wrong.shift is not None) == (lighting == "varied"), wrong
     for _, T in kfs:
-        corrected = wrong.T_correction @ T @ slide
-        assert np.linalg.norm(corrected[:3, 3] - T[:3, 3]) < 0.01, (corrected[:3, 3] - T[:3, 3])
+        assert _image_error_px(scene, T @ wrong_pose, T) > 3.0
+        assert _image_error_px(scene, wrong.T_correction @ T @ wrong_pose, T) < 1.0
+    if wrong.shift is not None:
+        slide_only = _image_error_px(scene, _shift_correction(view, wrong.shift) @ kfs[0][1] @ wrong_pose, kfs[0][1])
+        assert (slide_only < 1.0) == (plant == "slide"), slide_only
     right = verify(view, [(img, T, scene.camera) for img, T in kfs])
     assert right.T_correction is None
-
 
 
 @pytest.mark.parametrize("corrections", [0, 2])
