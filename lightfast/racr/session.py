@@ -479,8 +479,8 @@ class RacrSession:
         cfg = self.verification_config
         if verification is not None and verification.verdict == "failed" and \
                 verification.T_correction is not None and self._corrections < cfg.corrections and \
-                self._observation is not None and self._hand_eye is not None:
-            T_ref_cam = verification.T_correction @ self._camera_in_reference(self._observation.T_vse_cam)
+                self._vse_pose is not None and self._hand_eye is not None:
+            T_ref_cam = verification.T_correction @ self._camera_in_reference(self._vse_pose[0])
             M = _hand_motion(T_ref_cam, self._T_ref_camref, self._hand_eye.T_cam_hand)
             self._delta = verification.T_correction @ self._delta
             self._corrections += 1

@@ -210,9 +210,8 @@ def verify(view: ReferenceView, keyframes: Sequence[tuple[ArrayLike, ArrayLike, 
     """The verdict on an estimate from keyframes ``(image in [0, 1] or uint8, T_ref_cam, camera)`` (module
     docstring)."""
     cfg = view.config
-    matches = agreeing = best_other = 0
-    disagreement = float("nan")
-    correction: Array | None = None
+    matches = agreeing = pnp_inliers = 0
+    starts = [np.eye(4)]  # the pooled fit starts at the estimate and at the best keyframe's PnP pose
     matched: list[_Matches] = []
     for image, T_ref_cam, cam in keyframes:
         p_kf, p_ref = sift_matches(image, view.image, AcrConfig())
@@ -231,32 +230,23 @@ def verify(view: ReferenceView, keyframes: Sequence[tuple[ArrayLike, ArrayLike, 
         found, rvec, tvec, inliers = cv2.solvePnPRansac(
             X_ref.astype(np.float64), p_kf.astype(np.float64), cam.K, None, reprojectionError=cfg.agree_px,
             iterationsCount=500, confidence=0.999, flags=cv2.SOLVEPNP_EPNP)
-        if not found or inliers is None or len(inliers) <= best_other:
-            continue
-        R, _ = cv2.Rodrigues(rvec)
-        idx = inliers.ravel()
-        uv_other = (cam.K @ (X_ref[idx] @ R.T + tvec.ravel()).T).T
-        uv_other = uv_other[:, :2] / uv_other[:, 2:3]
-        moved = float(np.mean(np.linalg.norm(uv_other - np.where(front[idx, None], uv[idx], np.inf), axis=1)))
-        best_other, disagreement = len(idx), moved
-        # the PnP pose of this keyframe, T_cam_ref, is the estimate's corrected by δ: T_cam_ref δ⁻¹
-        correction = inverse(make_transform(R, tvec.ravel())) @ m.T_cam_ref
-    support, moved, pooled = _corrected_pose(view, matched)
+        if found and inliers is not None and len(inliers) > max(pnp_inliers, cfg.min_other_pose - 1):
+            pnp_inliers = len(inliers)
+            # this keyframe's PnP pose T_cam_ref is the estimate's corrected by δ: T_cam_ref δ⁻¹
+            starts[1:] = [inverse(make_transform(cv2.Rodrigues(rvec)[0], tvec.ravel())) @ m.T_cam_ref]
+    support, moved, correction = max((_corrected_pose(view, matched, start) for start in starts),
+                                      key=lambda fit: fit[0])
+    if support >= cfg.min_other_pose and support > agreeing and moved > cfg.verify_px:
+        # the matches put the camera elsewhere (a near miss, when a few right ones land within verify_px of it)
+        return Verification("failed", matches, agreeing, support, moved, T_correction=correction)
     if agreeing >= cfg.min_agreeing:
-        if support >= cfg.min_other_pose and support > agreeing and moved > cfg.verify_px:
-            # a few right matches land within verify_px of a near miss: the matches put the camera elsewhere
-            return Verification("failed", matches, agreeing, support, moved, T_correction=pooled)
-        return Verification("verified", matches, agreeing, best_other, disagreement)
-    if support > max(best_other, agreeing):
-        best_other, disagreement, correction = support, moved, pooled
-    if best_other >= cfg.min_other_pose and disagreement > cfg.agree_px:
-        return Verification("failed", matches, agreeing, best_other, disagreement, T_correction=correction)
+        return Verification("verified", matches, agreeing, support, moved)
     shift = image_shift(view, keyframes)
     if shift.agreeing >= cfg.shift_min_keyframes and shift.norm_px > cfg.agree_px:
-        correction = _image_correction(view, keyframes, shift)
-        return Verification("failed", matches, agreeing, 0, shift=shift,
-                            T_correction=_shift_correction(view, shift) if correction is None else correction)
-    return Verification("ambiguous", matches, agreeing, best_other, disagreement, shift=shift)
+        flow_correction, flow_moved = _image_correction(view, keyframes, shift)
+        if flow_correction is None or flow_moved > cfg.verify_px:
+            return Verification("failed", matches, agreeing, 0, flow_moved, shift=shift, T_correction=flow_correction)
+    return Verification("ambiguous", matches, agreeing, support, moved, shift=shift)
 
 
 @dataclass(frozen=True)
@@ -270,10 +260,11 @@ class _Matches:
     camera: PinholeCamera
 
 
-def _corrected_pose(view: ReferenceView, matched: Sequence[_Matches]) -> tuple[int, float, Array | None]:
-    """The pose the matches of all keyframes together put the estimate at, near it: one rigid correction ``δ`` of
-    the reference frame (every keyframe's pose is the estimate's, so they share its error), ``T_cam_ref δ⁻¹``,
-    fitted by robust least squares (Cauchy at ``agree_px``, then at ``verify_px``) from the identity. Returns the
+def _corrected_pose(view: ReferenceView, matched: Sequence[_Matches],
+                    start: Array | None = None) -> tuple[int, float, Array | None]:
+    """The pose the matches of all keyframes together put the estimate at: one rigid correction ``δ`` of the
+    reference frame (every keyframe's pose is the estimate's, so they share its error), ``T_cam_ref δ⁻¹``, fitted by
+    robust least squares (Cauchy at ``agree_px``, then at ``verify_px``) from ``start`` (default identity). Returns the
     matches within ``verify_px`` at the corrected pose, the mean displacement (px) of those features between
     the estimate's and the corrected pose's projections and ``δ`` ((0, NaN, None) without matches). Unlike a PnP per
     keyframe it pools the keyframes' matches, which alone are too few (an estimate a few cm off along a facade)."""
@@ -296,6 +287,9 @@ def _corrected_pose(view: ReferenceView, matched: Sequence[_Matches]) -> tuple[i
         return np.concatenate([(uv - m.p_kf).ravel() for uv, m in zip(project(xi), matched, strict=True)])
 
     xi = np.zeros(6)
+    if start is not None:  # δ = T_ref_camref · Tr(t) · R(ω) · T_camref_ref
+        d = T_camref_ref @ start @ T_ref_camref
+        xi = np.r_[cv2.Rodrigues(d[:3, :3])[0].ravel(), d[:3, 3]]
     for f_scale in (cfg.agree_px, cfg.verify_px):
         xi = least_squares(residuals, xi, loss="cauchy", f_scale=f_scale,
                            x_scale=np.r_[np.full(3, 0.01), np.full(3, 0.05)]).x
@@ -311,25 +305,15 @@ def _corrected_pose(view: ReferenceView, matched: Sequence[_Matches]) -> tuple[i
             delta)
 
 
-def _shift_correction(view: ReferenceView, shift: ImageShift) -> Array:
-    """The correction ``δ`` an image shift gives: a translation across the reference view that moves the scene at
-    the reference's median depth by the shift (a slide along the relief, the geometric alignment's failure; the
-    image alone cannot tell it from a rotation, which the alignment of a relief constrains well)."""
-    depth = _median_depth(view)
-    dx, dy = shift.shift_px
-    # the camera slid opposite to the keyframes' content (sign checked by test_a_failed_check_gives_the_correction)
-    t_camref = -depth * np.array([dx / view.camera.fx, dy / view.camera.fy, 0.0])
-    return view.T_ref_camref @ make_transform(np.eye(3), t_camref) @ inverse(view.T_ref_camref)
-
-
 def _image_correction(view: ReferenceView, keyframes: Sequence[tuple[ArrayLike, ArrayLike, PinholeCamera]],
-                      shift: ImageShift) -> Array | None:
+                      shift: ImageShift) -> tuple[Array | None, float]:
     """The correction ``δ`` the images give when their matches are too few (a strong lighting change): each keyframe
     warped into the reference view by the estimate (:func:`image_shift`) and the shift, the dense optical flow
     (Farnebäck) of the gradient magnitudes from the reference to it gives, at reference pixels on edges with a
     depth, the keyframe pixel of their content (the warp is a change of pixel grid: parallax is kept); then one
     correction of the estimate fitted to all keyframes' pixels (:func:`_corrected_pose`). Unlike the shift alone it
-    sees rotation and depth. None without pixels."""
+    sees rotation and depth. Returns ``δ`` and the mean displacement (px) of those pixels' content between the
+    estimate and the corrected poses; (None, NaN) without pixels."""
     ref = _gradient_magnitude(view.image)
     h, w = ref.shape
     step = 4
@@ -340,18 +324,25 @@ def _image_correction(view: ReferenceView, keyframes: Sequence[tuple[ArrayLike, 
     X_ref, _ = view.lift(uv_ref)
     to_u8 = 255.0 / max(float(np.percentile(ref, 99)), 1e-6)
     grads = [_gradient_magnitude(image) for image, _, _ in keyframes]
-    delta = np.eye(4)
-    for it in range(3):  # the flow is exact near zero: re-warp by the correction so far
+    delta: Array | None = None
+    for _ in range(3):  # the flow is exact near zero: re-warp by the correction so far
         # the first round starts from the shift, the later ones from the correction so far
-        s_px = shift.shift_px if it == 0 else (0.0, 0.0)
-        found = _flow_correspondences(view, keyframes, grads, delta, s_px, ref, uv_ref, X_ref, to_u8)
-        if not found:
-            return None if it == 0 else delta
-        step_delta = _corrected_pose(view, found)[2]
+        found = _flow_correspondences(view, keyframes, grads, np.eye(4) if delta is None else delta,
+                                      shift.shift_px if delta is None else (0.0, 0.0), ref, uv_ref, X_ref, to_u8)
+        step_delta = _corrected_pose(view, found)[2] if found else None
         if step_delta is None:
-            return None if it == 0 else delta
-        delta = step_delta @ delta
-    return delta
+            break
+        delta = step_delta if delta is None else step_delta @ delta
+    if delta is None:
+        return None, float("nan")
+    moved = []
+    for _, T_ref_cam, cam in keyframes:
+        T = np.asarray(T_ref_cam, np.float64)
+        uv_est, ok_est = cam.project(transform_points(inverse(T), X_ref))
+        uv_fix, ok_fix = cam.project(transform_points(inverse(delta @ T), X_ref))
+        both = ok_est & ok_fix
+        moved.append(np.linalg.norm(uv_fix[both] - uv_est[both], axis=1))
+    return delta, float(np.mean(np.concatenate(moved))) if moved else float("nan")
 
 
 
