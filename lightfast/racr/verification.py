@@ -7,10 +7,11 @@ period), and g ≤ η then holds at the wrong place. The checks use evidence the
 1. SIFT matches between the reference image and the current VSE keyframes (:func:`verify`): each reference keypoint
    is lifted to 3-D with the reference cloud (the nearest projected point within ``depth_radius_px``) and projected
    into the keyframe with the estimate (``T_ref_cam = T_p ⟨R_A, σ_p s t_A⟩``, Eq. 2–3); it *agrees* within
-   ``verify_px`` (keypoint noise). ``min_agreeing`` agreeing matches verify, unless one correction of the estimate
-   fitted to all keyframes' matches has more of them within ``verify_px`` and moves them beyond it (a near miss:
-   ``failed``). Without enough agreeing matches, ``min_other_pose`` matches within ``verify_px`` of a pose that moves
-   them beyond ``agree_px`` (that fit, or a PnP RANSAC per keyframe) make the convergence ``failed``.
+   ``verify_px`` (keypoint noise). One correction of the estimate is fitted to all keyframes' matches (from the
+   estimate and from the best keyframe's PnP pose); with ``min_other_pose`` matches within ``verify_px``, more than
+   the estimate, and moving them beyond ``verify_px``, the convergence is ``failed`` (fewer than ``min_agreeing``
+   agree, or half of them fit that pose too: a near miss) or ``ambiguous`` (disjoint matches fit both: a repetitive
+   texture). Else ``min_agreeing`` agreeing matches verify.
 2. The image as a whole, when matches cannot tell (:func:`image_shift`): each keyframe is warped into the reference
    view by the estimate (the homography of the plane at the reference's median depth) and its gradient magnitude
    (edges of the relief stay edges whichever side the light comes from) is phase-correlated with the reference's.
@@ -21,10 +22,9 @@ period), and g ≤ η then holds at the wrong place. The checks use evidence the
    more than ``agree_px`` in the reference image is another fit: clearly better (fitness ×1/``basin_fitness_ratio``)
    ``failed``, comparable ``ambiguous``, none ``verified`` by the geometry.
 
-A ``failed`` check carries the correction ``δ`` the image gives, which the session moves the camera by before
-checking again (``corrections``): the matches' pose, or after a shift the dense flow of the gradient magnitudes
-(:func:`_image_correction`). Inputs: the reference cloud (m, reference frame), its camera and pose, the reference
-image; keyframes (image in [0, 1], ``T_ref_cam`` m, camera).
+A check failed by the matches carries the correction ``δ`` they give (within ``max_correction_deg``), which the
+session moves the camera by before checking again (``corrections``). Inputs: the reference cloud (m, reference
+frame), its camera and pose, the reference image; keyframes (image in [0, 1], ``T_ref_cam`` m, camera).
 """
 from __future__ import annotations
 
@@ -39,7 +39,7 @@ from scipy.optimize import least_squares
 
 from lightfast.camera import PinholeCamera
 from lightfast.config import Config, ConfigError, param
-from lightfast.geometry import inverse, make_transform, so3_exp, transform_points
+from lightfast.geometry import inverse, make_transform, rotation_angle_deg, so3_exp, transform_points
 from lightfast.racr.acr_baseline import AcrConfig, sift_matches
 from lightfast.racr.errors import AlignmentError
 from lightfast.racr.fast_alignment import FastAlignmentConfig, ReferenceCloud, fast_align
@@ -84,10 +84,13 @@ class VerificationConfig(Config):
                                        "fitness is at least this share of the estimate's (ambiguous), and a better "
                                        "fit when the estimate's is at most this share of its (failed).", min=0.01,
                                        max=1.0)
-    corrections: int = param(2, description="After a failed check, the camera is moved where the reference image "
-                             "puts it (the check's correction: the matches' pose or the image shift) and checked "
-                             "again, at most this many times; verified then, the run converged (0: a failed check "
-                             "ends the run).", min=0, max=10)
+    max_correction_deg: float = param(20.0, description="A correction that turns the camera by more than this is "
+                                      "not made (rACR starts a few degrees from the reference; the matches then fit "
+                                      "a look-alike elsewhere in the image, not a slide of the alignment), deg.",
+                                      min=0.0, max=180.0)
+    corrections: int = param(2, description="After a check failed by the matches, the camera is moved where they put "
+                             "it and checked again, at most this many times; verified then, the run converged (0: a "
+                             "failed check ends the run).", min=0, max=10)
 
     def check(self) -> None:
         if self.verify_px > self.agree_px:
@@ -213,6 +216,7 @@ def verify(view: ReferenceView, keyframes: Sequence[tuple[ArrayLike, ArrayLike, 
     matches = agreeing = pnp_inliers = 0
     starts = [np.eye(4)]  # the pooled fit starts at the estimate and at the best keyframe's PnP pose
     matched: list[_Matches] = []
+    agree: list[NDArray[np.bool_]] = []
     for image, T_ref_cam, cam in keyframes:
         p_kf, p_ref = sift_matches(image, view.image, AcrConfig())
         X_ref, ok = view.lift(p_ref)
@@ -224,7 +228,8 @@ def verify(view: ReferenceView, keyframes: Sequence[tuple[ArrayLike, ArrayLike, 
         matched.append(m)
         uv, front = cam.project(transform_points(m.T_cam_ref, X_ref))
         err = np.where(front, np.linalg.norm(uv - p_kf, axis=1), np.inf)
-        agreeing += int(np.count_nonzero(err <= cfg.verify_px))
+        agree.append(err <= cfg.verify_px)
+        agreeing += int(np.count_nonzero(agree[-1]))
         if len(p_kf) < cfg.min_other_pose:
             continue
         found, rvec, tvec, inliers = cv2.solvePnPRansac(
@@ -234,18 +239,22 @@ def verify(view: ReferenceView, keyframes: Sequence[tuple[ArrayLike, ArrayLike, 
             pnp_inliers = len(inliers)
             # this keyframe's PnP pose T_cam_ref is the estimate's corrected by δ: T_cam_ref δ⁻¹
             starts[1:] = [inverse(make_transform(cv2.Rodrigues(rvec)[0], tvec.ravel())) @ m.T_cam_ref]
-    support, moved, correction = max((_corrected_pose(view, matched, start) for start in starts),
-                                      key=lambda fit: fit[0])
+    support, moved, correction, inlier = max((_corrected_pose(view, matched, start) for start in starts),
+                                              key=lambda fit: fit[0])
     if support >= cfg.min_other_pose and support > agreeing and moved > cfg.verify_px:
-        # the matches put the camera elsewhere (a near miss, when a few right ones land within verify_px of it)
-        return Verification("failed", matches, agreeing, support, moved, T_correction=correction)
+        # the estimate's agreeing matches fit the other pose too (a near miss: a few right matches land within
+        # verify_px of it), or they are too few: the matches put the camera elsewhere
+        if agreeing < cfg.min_agreeing or np.count_nonzero(inlier & np.concatenate(agree)) * 2 >= agreeing:
+            if correction is not None and rotation_angle_deg(correction[:3, :3]) > cfg.max_correction_deg:
+                correction = None  # a look-alike elsewhere in the image, not a slide of the alignment
+            return Verification("failed", matches, agreeing, support, moved, T_correction=correction)
+        # the estimate and a pose far from it both fit the matches: a repetitive texture
+        return Verification("ambiguous", matches, agreeing, support, moved)
     if agreeing >= cfg.min_agreeing:
         return Verification("verified", matches, agreeing, support, moved)
     shift = image_shift(view, keyframes)
     if shift.agreeing >= cfg.shift_min_keyframes and shift.norm_px > cfg.agree_px:
-        flow_correction, flow_moved = _image_correction(view, keyframes, shift)
-        if flow_correction is None or flow_moved > cfg.verify_px:
-            return Verification("failed", matches, agreeing, 0, flow_moved, shift=shift, T_correction=flow_correction)
+        return Verification("failed", matches, agreeing, support, moved, shift=shift)
     return Verification("ambiguous", matches, agreeing, support, moved, shift=shift)
 
 
@@ -261,16 +270,18 @@ class _Matches:
 
 
 def _corrected_pose(view: ReferenceView, matched: Sequence[_Matches],
-                    start: Array | None = None) -> tuple[int, float, Array | None]:
+                    start: Array | None = None) -> tuple[int, float, Array | None, NDArray[np.bool_]]:
     """The pose the matches of all keyframes together put the estimate at: one rigid correction ``δ`` of the
     reference frame (every keyframe's pose is the estimate's, so they share its error), ``T_cam_ref δ⁻¹``, fitted by
     robust least squares (Cauchy at ``agree_px``, then at ``verify_px``) from ``start`` (default identity). Returns the
     matches within ``verify_px`` at the corrected pose, the mean displacement (px) of those features between
-    the estimate's and the corrected pose's projections and ``δ`` ((0, NaN, None) without matches). Unlike a PnP per
+    the estimate's and the corrected pose's projections, ``δ`` and which matches (concatenated) are within
+    ``verify_px`` ((0, NaN, None, none) without matches). Unlike a PnP per
     keyframe it pools the keyframes' matches, which alone are too few (an estimate a few cm off along a facade)."""
     cfg = view.config
-    if sum(len(m.p_kf) for m in matched) < cfg.min_agreeing:
-        return 0, float("nan"), None
+    n = sum(len(m.p_kf) for m in matched)
+    if n < cfg.min_agreeing:
+        return 0, float("nan"), None, np.zeros(n, dtype=bool)
     T_ref_camref = view.T_ref_camref
     T_camref_ref = inverse(T_ref_camref)
 
@@ -298,80 +309,11 @@ def _corrected_pose(view: ReferenceView, matched: Sequence[_Matches],
     p_kf = np.concatenate([m.p_kf for m in matched])
     inlier = np.linalg.norm(uv_fit - p_kf, axis=1) <= cfg.verify_px
     if not inlier.any():
-        return 0, float("nan"), None
+        return 0, float("nan"), None, inlier
     delta = T_ref_camref @ make_transform(np.eye(3), xi[3:]) @ make_transform(so3_exp(xi[:3]), np.zeros(3)) \
         @ T_camref_ref
     return (int(np.count_nonzero(inlier)), float(np.mean(np.linalg.norm(uv_fit[inlier] - uv_est[inlier], axis=1))),
-            delta)
-
-
-def _image_correction(view: ReferenceView, keyframes: Sequence[tuple[ArrayLike, ArrayLike, PinholeCamera]],
-                      shift: ImageShift) -> tuple[Array | None, float]:
-    """The correction ``δ`` the images give when their matches are too few (a strong lighting change): each keyframe
-    warped into the reference view by the estimate (:func:`image_shift`) and the shift, the dense optical flow
-    (Farnebäck) of the gradient magnitudes from the reference to it gives, at reference pixels on edges with a
-    depth, the keyframe pixel of their content (the warp is a change of pixel grid: parallax is kept); then one
-    correction of the estimate fitted to all keyframes' pixels (:func:`_corrected_pose`). Unlike the shift alone it
-    sees rotation and depth. Returns ``δ`` and the mean displacement (px) of those pixels' content between the
-    estimate and the corrected poses; (None, NaN) without pixels."""
-    ref = _gradient_magnitude(view.image)
-    h, w = ref.shape
-    step = 4
-    v, u = np.mgrid[step // 2:h:step, step // 2:w:step]
-    u, v = u.ravel(), v.ravel()
-    keep = np.isfinite(view.depth_m[v, u]) & (ref[v, u] > np.median(ref))  # on the relief's edges, with a depth
-    uv_ref = np.c_[u[keep], v[keep]].astype(np.float64)
-    X_ref, _ = view.lift(uv_ref)
-    to_u8 = 255.0 / max(float(np.percentile(ref, 99)), 1e-6)
-    grads = [_gradient_magnitude(image) for image, _, _ in keyframes]
-    delta: Array | None = None
-    for _ in range(3):  # the flow is exact near zero: re-warp by the correction so far
-        # the first round starts from the shift, the later ones from the correction so far
-        found = _flow_correspondences(view, keyframes, grads, np.eye(4) if delta is None else delta,
-                                      shift.shift_px if delta is None else (0.0, 0.0), ref, uv_ref, X_ref, to_u8)
-        step_delta = _corrected_pose(view, found)[2] if found else None
-        if step_delta is None:
-            break
-        delta = step_delta if delta is None else step_delta @ delta
-    if delta is None:
-        return None, float("nan")
-    moved = []
-    for _, T_ref_cam, cam in keyframes:
-        T = np.asarray(T_ref_cam, np.float64)
-        uv_est, ok_est = cam.project(transform_points(inverse(T), X_ref))
-        uv_fix, ok_fix = cam.project(transform_points(inverse(delta @ T), X_ref))
-        both = ok_est & ok_fix
-        moved.append(np.linalg.norm(uv_fix[both] - uv_est[both], axis=1))
-    return delta, float(np.mean(np.concatenate(moved))) if moved else float("nan")
-
-
-
-def _flow_correspondences(view: ReferenceView, keyframes: Sequence[tuple[ArrayLike, ArrayLike, PinholeCamera]],
-                          grads: Sequence[NDArray[np.float32]], delta: Array, shift_px: tuple[float, float],
-                          ref: NDArray[np.float32], uv_ref: Array, X_ref: Array, to_u8: float) -> list[_Matches]:
-    h, w = ref.shape
-    u, v = np.rint(uv_ref[:, 0]).astype(np.intp), np.rint(uv_ref[:, 1]).astype(np.intp)
-    matched = []
-    for (_, T_ref_cam_est, cam), kf in zip(keyframes, grads, strict=True):
-        T_ref_cam = delta @ np.asarray(T_ref_cam_est, np.float64)
-        # warped(y) = keyframe(H y), H the plane homography after the shift (the phase correlation's shift s:
-        # warped by the plane alone, the keyframe's content at y + s is the reference's at y): content at y is at H y
-        H = _plane_homography(view, T_ref_cam, cam) @ np.array([[1.0, 0.0, shift_px[0]], [0.0, 1.0, shift_px[1]],
-                                                                 [0.0, 0.0, 1.0]])
-        warped = cv2.warpPerspective(kf, H, (w, h), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP)
-        reach = cv2.warpPerspective(np.ones_like(kf), H, (w, h), flags=cv2.INTER_NEAREST | cv2.WARP_INVERSE_MAP)
-        flow = cv2.calcOpticalFlowFarneback(np.clip(ref * to_u8, 0, 255).astype(np.uint8),
-                                            np.clip(warped * to_u8, 0, 255).astype(np.uint8),
-                                            np.zeros((h, w, 2), np.float32), 0.5, 3, 21, 5,
-                                            7, 1.5, 0)
-        y = uv_ref + flow[v, u].astype(np.float64)
-        yi = np.rint(y).astype(np.intp)
-        ok = (yi[:, 0] >= 0) & (yi[:, 0] < w) & (yi[:, 1] >= 0) & (yi[:, 1] < h) & (reach[v, u] > 0)
-        ok[ok] &= reach[yi[ok, 1], yi[ok, 0]] > 0
-        p = np.c_[y[ok], np.ones(int(ok.sum()))] @ H.T
-        if len(p) >= view.config.min_other_pose:
-            matched.append(_Matches(p[:, :2] / p[:, 2:3], X_ref[ok], inverse(T_ref_cam), cam))
-    return matched
+            delta, inlier)
 
 
 def _gradient_magnitude(image: ArrayLike) -> NDArray[np.float32]:
