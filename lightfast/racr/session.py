@@ -19,7 +19,7 @@ and publishes what it returns.
    puts that camera at the reference pose); every VSE input is scaled by ``s`` (§3.3: ``P = s · P_VSE``,
    ``t_A = s · t_VSE``, keyframe translations alike) before it is handed on; platform stops are ``moving=False``
    poses. Hand motions come from :meth:`RacrScheme.next_hand_motion` until it reports convergence (``g ≤ η``).
-4. **The self-check** (:mod:`lightfast.racr.verification`, not in the paper): the estimate is checked against the
+4. **The self-check** (:mod:`lightfast.racr.self_check`, not in the paper): the estimate is checked against the
    reference image; a failed check with a correction ``δ`` (where the image puts the camera) moves the camera by
    it (``kind`` ``correction``, stage ``correcting``) and checks again, up to ``corrections`` times. Then the run
    is over (``converged``, ``failed`` or ``ambiguous``): no further motion is issued.
@@ -35,7 +35,7 @@ import math
 import threading
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -43,27 +43,15 @@ from numpy.typing import ArrayLike, NDArray
 from lightfast.camera import PinholeCamera
 from lightfast.config import Config, ConfigError, param
 from lightfast.geometry import make_transform, rotation_angle_deg, so3_exp
-from lightfast.racr.adjustment import (
-    AdjustmentConfig,
-    _hand_motion,
-    _inverse,
-    _rigid,
-    camera_pose_in_reference,
-    motion_gap,
-)
+from lightfast.racr.adjustment import AdjustmentConfig, _inverse, _rigid, camera_pose_in_reference, motion_gap
 from lightfast.racr.alignment_job import finite_vse_cloud
 from lightfast.racr.errors import InitializationError, RacrError
 from lightfast.racr.fast_alignment import FastAlignmentConfig, ReferenceCloud
 from lightfast.racr.fine import FineAlignmentConfig, Keyframe
 from lightfast.racr.initialization import HandEyeResult, InitializationConfig, initialize
 from lightfast.racr.scheme import RacrScheme, SchemeConfig, SchemeStatus
-from lightfast.racr.verification import (
-    ReferenceView,
-    Verification,
-    VerificationConfig,
-    restart_fits,
-    verify,
-)
+from lightfast.racr.self_check import SelfCheck
+from lightfast.racr.verification import ReferenceView, Verification, VerificationConfig
 
 __all__ = [
     "HAND_AXES",
@@ -266,13 +254,7 @@ class RacrSession:
         self._init_error: str | None = None
         self._scheme: RacrScheme | None = None
         self._converged = False
-        # the self-check's corrections (module docstring, 4.): the estimate at the scheme's convergence
-        # (T_ref_cur, σ_p), the correction δ applied to it so far, the correction motion awaiting its stop, the stop
-        self._final: tuple[Array, float] | None = None
-        self._delta = np.eye(4)
-        self._corrections = 0
-        self._correction_issued: float | None = None
-        self._correction_stop: float | None = None
+        self._check: SelfCheck | None = None  # the self-check, from the scheme's convergence on (module docstring)
 
     # ------------------------------------------------------------------ lifecycle
     def stop(self, timeout: float | None = 30.0) -> None:
@@ -350,9 +332,8 @@ class RacrSession:
                 self._pending = None
                 self._last_stop = t
                 self._after_hand = T
-            if self._correction_issued is not None and t >= self._correction_issued:
-                self._correction_issued = None
-                self._correction_stop = t
+            if self._check is not None:
+                self._check.stopped(t)
         if scheme is not None:
             scheme.add_platform_pose(T, moving=False, stamp=t)
 
@@ -372,8 +353,9 @@ class RacrSession:
                 return self._next_initialization_motion()
             if self._converged:
                 return None  # relocalized: the run is over
-            correcting = self._final is not None
-            if correcting and not self._correction_ended():
+            check, obs = self._check, self._observation
+            correcting = check is not None and check.corrections > 0
+            if check is not None and correcting and not check.ready(None if obs is None else obs.stamp):
                 return None
         if correcting:  # the check again, after a correction motion (outside the lock: it matches images)
             verification = self._verify()
@@ -385,8 +367,10 @@ class RacrSession:
         if step.converged:
             st = scheme.status
             with self._lock:
-                if st.T_ref_cur is not None and st.sigma is not None:
-                    self._final = (st.T_ref_cur, st.sigma)
+                if self._view is not None and st.T_ref_cur is not None and st.sigma is not None and \
+                        self._scale is not None:
+                    self._check = SelfCheck(self._view, self._reference, self.fast_config, st.T_ref_cur, st.sigma,
+                                            self._scale)
             verification = self._verify()
             with self._lock:
                 return self._conclude(verification, step.g)
@@ -447,62 +431,35 @@ class RacrSession:
             scheme.add_vse_pose(_scaled_pose(self._vse_pose[0], result.scale_m_per_vse), stamp=self._vse_pose[1])
 
     # ------------------------------------------------------------------ self-check (module docstring, 4.)
-    def _camera_in_reference(self, T_vse_cam: Array) -> Array:
-        """A VSE pose (VSE units) in the reference frame by the final estimate and the corrections so far."""
-        assert self._final is not None and self._scale is not None
-        T_ref_cur, sigma = self._final
-        return self._delta @ camera_pose_in_reference(_scaled_pose(T_vse_cam, self._scale), T_ref_cur, sigma)
-
     def _verify(self) -> Verification | None:
-        """The self-check of the final estimate (:mod:`lightfast.racr.verification`) on the latest observation's
-        keyframes, placed in the reference frame by it; None without a reference image."""
-        obs, s = self._observation, self._scale
-        if self._view is None or obs is None or s is None or self._final is None:
+        """The self-check on the latest observation; None without a reference image."""
+        check, obs = self._check, self._observation
+        if check is None or obs is None:
             return None
-        kfs = [(k.image, self._camera_in_reference(np.array(k.T_cur_cam)), k.camera) for k in obs.keyframes]
-        result = verify(self._view, kfs)
-        if result.verdict != "ambiguous" or self._corrections > 0:
-            return result  # after a correction the geometry's fit is not the estimate any more: it cannot tell
-        # the image cannot tell (a strong lighting change): is the geometric fit the best around the estimate?
-        T_ref_cur, sigma = self._final
-        try:
-            restarts = restart_fits(obs.points * s, self._reference, T_ref_cur, sigma,
-                                    self._camera_in_reference(obs.T_vse_cam), self._view, self.fast_config)
-        except RacrError as exc:
-            logger.info("restarts around the estimate failed: %s", exc)
-            return result
-        return replace(result, verdict=restarts.verdict, restarts=restarts)
+        return check.check(obs.points, obs.T_vse_cam, obs.keyframes)
 
     def _conclude(self, verification: Verification | None, g: float | None) -> MotionCommand | None:
         """After a check (lock held): a correction motion when the check failed with a correction and some are
         left, else the end of the run with this verdict."""
-        cfg = self.verification_config
-        if verification is not None and verification.verdict == "failed" and \
-                verification.T_correction is not None and self._corrections < cfg.corrections and \
-                self._vse_pose is not None and self._hand_eye is not None:
-            T_ref_cam = verification.T_correction @ self._camera_in_reference(self._vse_pose[0])
-            M = _hand_motion(T_ref_cam, self._T_ref_camref, self._hand_eye.T_cam_hand)
-            self._delta = verification.T_correction @ self._delta
-            self._corrections += 1
-            self.verification = verification
-            now = self._clock()
-            self._correction_issued, self._correction_stop = now, None
-            self._motions_issued += 1
-            logger.info("rACR self-check failed (%s): correction %d of %d", verification.describe(),
-                        self._corrections, cfg.corrections)
-            return MotionCommand(M, "correction", self._motions_issued, now, motion_gap(M), T_ref_cam)
-        if verification is not None and self._corrections > 0:
-            verification = replace(verification, corrections=self._corrections)
+        check = self._check
+        if check is not None and verification is not None:
+            motion = None
+            if self._vse_pose is not None and self._hand_eye is not None:
+                motion = check.correction(verification, self._vse_pose[0], self._hand_eye.T_cam_hand, self._clock())
+            if motion is not None:
+                self.verification = verification
+                self._motions_issued += 1
+                logger.info("rACR self-check failed (%s): correction %d of %d", verification.describe(),
+                            check.corrections, self.verification_config.corrections)
+                M, T_ref_cam = motion
+                return MotionCommand(M, "correction", self._motions_issued, check.issued or self._clock(),
+                                     motion_gap(M), T_ref_cam)
+            verification = check.final(verification)
         self._converged = True
         self.verification = verification
         logger.info("rACR converged%s%s", "" if g is None else f": g={g:.3g}",
                     "" if verification is None else f"; {verification.describe()}")
         return None
-
-    def _correction_ended(self) -> bool:
-        """(lock held) The correction motion has stopped and an observation taken after the stop has arrived."""
-        obs, stop = self._observation, self._correction_stop
-        return self._correction_issued is None and stop is not None and obs is not None and obs.stamp > stop
 
     def _hand_eye_result(self, result: HandEyeResult) -> HandEyeResult:
         """The initialization's result as the scheme gets it: unchanged here; a study of the method's sensitivity
@@ -575,9 +532,10 @@ class RacrSession:
         done = len(self._pairs_A)
         timeout = self.scheme_config.platform_timeout_s
         v = self.verification
-        if self._final is not None and not self._converged and v is not None:
-            moving = "moving" if self._correction_issued is not None else "checking again"
-            return "correcting", "warn", (f"converged to a wrong pose ({v.describe()}): correction {self._corrections}"
+        check = self._check
+        if check is not None and check.corrections > 0 and not self._converged and v is not None:
+            moving = "moving" if check.issued is not None else "checking again"
+            return "correcting", "warn", (f"converged to a wrong pose ({v.describe()}): correction {check.corrections}"
                                           f" of {self.verification_config.corrections} {moving}")
         if sst is not None and sst.stage == "converged" and v is not None and v.verdict != "verified":
             g = "" if sst.g is None else f" (g={sst.g:.3g} after {sst.adjustments} adjustments)"
