@@ -177,6 +177,9 @@ class Verification:
             return (f"the reference image disagrees: {self.other_pose_inliers} matches put the camera elsewhere "
                     f"(features {self.disagreement_px:.1f} px from where the estimate puts them; {self.agreeing} "
                     "agree)")
+        if sh is None and r is None and self.verdict == "ambiguous":  # decided by the matches: two poses fit
+            return (f"the reference image fits two poses: {self.agreeing} of {self.matches} matches agree with the "
+                    f"estimate, {self.other_pose_inliers} with a pose {self.disagreement_px:.1f} px away")
         return f"unverified: {self.agreeing} of {self.matches} reference-image matches agree (too few to tell)"
 
 
