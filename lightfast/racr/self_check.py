@@ -29,12 +29,6 @@ logger = logging.getLogger(__name__)
 Array = NDArray[np.float64]
 
 
-def _scaled(T: Array, s: float) -> Array:
-    out = np.array(T, dtype=np.float64)
-    out[:3, 3] *= s
-    return out
-
-
 @dataclass
 class SelfCheck:
     """The check of one run's final estimate ``(T_ref_cur, sigma)`` (``scale``: m per VSE unit) against the
@@ -54,7 +48,7 @@ class SelfCheck:
 
     def camera_in_reference(self, T_vse_cam: Array) -> Array:
         """A VSE pose (VSE units) in the reference frame by the final estimate and the corrections so far."""
-        return self.delta @ camera_pose_in_reference(_scaled(T_vse_cam, self.scale), self.T_ref_cur, self.sigma)
+        return self.delta @ camera_pose_in_reference(T_vse_cam, self.T_ref_cur, self.sigma * self.scale)
 
     def check(self, points_vse: Array, T_vse_cam: Array, keyframes: Sequence[Keyframe]) -> Verification:
         """The verdict on the estimate from an observation (cloud, camera pose and keyframes in VSE units)."""

@@ -146,8 +146,8 @@ class Verification:
     disagreement_px: float = float("nan")
     shift: ImageShift | None = None
     restarts: Restarts | None = None
-    #: for a ``failed`` image check: the correction ``δ`` (4×4, reference frame) the image gives, ``δ · T_ref_cam``
-    #: being where the image puts a camera the estimate puts at ``T_ref_cam`` (None otherwise)
+    #: for a check failed by the matches: the correction ``δ`` (4×4, reference frame) they give, ``δ · T_ref_cam``
+    #: being where they put a camera the estimate puts at ``T_ref_cam`` (None otherwise)
     T_correction: Array | None = field(default=None, compare=False)
     #: correction motions made before this check (the session's; 0: the check of the alignment's own convergence)
     corrections: int = 0
@@ -279,8 +279,8 @@ def _corrected_pose(view: ReferenceView, matched: Sequence[_Matches],
     robust least squares (Cauchy at ``agree_px``, then at ``verify_px``) from ``start`` (default identity). Returns the
     matches within ``verify_px`` at the corrected pose, the mean displacement (px) of those features between
     the estimate's and the corrected pose's projections, ``δ`` and which matches (concatenated) are within
-    ``verify_px`` ((0, NaN, None, none) without matches). Unlike a PnP per
-    keyframe it pools the keyframes' matches, which alone are too few (an estimate a few cm off along a facade)."""
+    ``verify_px`` ((0, NaN, None, none) without matches). Unlike a PnP per keyframe it pools the keyframes'
+    matches, which alone are too few (an estimate a few cm off along a facade)."""
     cfg = view.config
     n = sum(len(m.p_kf) for m in matched)
     if n < cfg.min_agreeing:
@@ -326,19 +326,6 @@ def _gradient_magnitude(image: ArrayLike) -> NDArray[np.float32]:
     return (m / max(float(m.mean()), 1e-12)).astype(np.float32)
 
 
-def _median_depth(view: ReferenceView) -> float:
-    finite = np.isfinite(view.depth_m)
-    return float(np.median(view.depth_m[finite])) if finite.any() else 1.0
-
-
-def _plane_homography(view: ReferenceView, T_ref_cam: ArrayLike, cam: PinholeCamera) -> Array:
-    """Reference pixels -> keyframe pixels through the plane at the reference's median depth (facing the reference
-    camera), the keyframe placed at ``T_ref_cam``."""
-    T = inverse(np.asarray(T_ref_cam, dtype=np.float64)) @ view.T_ref_camref  # reference camera -> keyframe
-    return cam.K @ (T[:3, :3] + np.outer(T[:3, 3], [0.0, 0.0, 1.0 / _median_depth(view)])) @ np.linalg.inv(
-        view.camera.K)
-
-
 def image_shift(view: ReferenceView, keyframes: Sequence[tuple[ArrayLike, ArrayLike, PinholeCamera]]) -> ImageShift:
     """The shift of the keyframes' images against the reference image where the estimate (each keyframe's
     ``T_ref_cam``) puts them (module docstring): each keyframe is warped into the reference camera by the homography
@@ -348,9 +335,13 @@ def image_shift(view: ReferenceView, keyframes: Sequence[tuple[ArrayLike, ArrayL
     ref = _gradient_magnitude(view.image)
     h, w = ref.shape
     window = cv2.createHanningWindow((w, h), cv2.CV_32F)
+    finite = np.isfinite(view.depth_m)
+    depth = float(np.median(view.depth_m[finite])) if finite.any() else 1.0
+    K_ref_inv = np.linalg.inv(view.camera.K)
     shifts = []
     for image, T_ref_cam, cam in keyframes:
-        H = _plane_homography(view, T_ref_cam, cam)
+        T = inverse(np.asarray(T_ref_cam, dtype=np.float64)) @ view.T_ref_camref  # reference camera -> keyframe
+        H = cam.K @ (T[:3, :3] + np.outer(T[:3, 3], [0.0, 0.0, 1.0 / depth])) @ K_ref_inv
         kf = _gradient_magnitude(image)
         flags = cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP
         warped = cv2.warpPerspective(kf, H, (w, h), flags=flags)
