@@ -1,6 +1,7 @@
 """The convergence self-check (lightfast.racr.verification) on a simulated scene: a right estimate is verified by
-the reference image, a wrong one (a slide along the relief) is failed, an image that matches nothing is
-ambiguous."""
+the reference image, a wrong one (a slide along the relief, a near miss) is failed with the correction the matches
+give, an image that matches nothing is ambiguous; on given matches, a repetitive look-alike is ambiguous; through the
+evaluation's simulated run, a planted wrong convergence is failed, or corrected and verified."""
 from __future__ import annotations
 
 import numpy as np
@@ -199,3 +200,49 @@ def test_a_planted_wrong_convergence_is_failed_or_corrected(scene, corrections, 
         assert record.reported == "failed" and v["verdict"] == "failed" and record.afd_px > 5.0, record
     else:
         assert record.reported == "converged" and v["corrections"] >= 1 and record.success, record
+
+
+def _relief_view():
+    """A reference camera (640×480, f = 500 px) in front of a relief (depth 0.8-1.4 m) densely covered by reference
+    points."""
+    from lightfast.camera import PinholeCamera
+
+    camera = PinholeCamera(640, 480, 500.0, 500.0, 319.5, 239.5)
+    v, u = np.mgrid[0:480:2, 0:640:2].astype(np.float64)
+    z = 1.1 + 0.3 * np.sin(u / 70.0) * np.cos(v / 90.0)
+    pts = np.c_[((u - 319.5) / 500.0 * z).ravel(), ((v - 239.5) / 500.0 * z).ravel(), z.ravel()]
+    return ReferenceView(pts, np.eye(4), np.zeros((480, 640)), camera), camera
+
+
+@pytest.mark.parametrize("case", ["look-alike", "elsewhere", "turned"])
+def test_the_matches_decide_between_a_look_alike_and_a_wrong_convergence(case, monkeypatch) -> None:
+    """Given matches (the matcher's output replaced: the decision is under test): 40 of them fit a camera 0.4 m
+    along the view (about 180 px away). With 12 more at the estimate itself ("look-alike", a repetitive texture:
+    75535/S05) both poses fit the image: ``ambiguous``, no correction. Without them ("elsewhere") the convergence is
+    ``failed`` with the correction to that pose; when that pose is turned 25° about the view ("turned", beyond
+    ``max_correction_deg``) it is failed without a correction."""
+    from lightfast.geometry import so3_exp, transform_points
+    from lightfast.racr import verification
+
+    view, camera = _relief_view()
+    rng = np.random.default_rng(3)
+    p_ref = np.c_[rng.uniform(250.0, 600.0, 40), rng.uniform(60.0, 420.0, 40)]
+    X, ok = view.lift(p_ref)
+    assert ok.all()
+    other = make_transform(so3_exp([0.0, 0.0, np.radians(25.0)]) if case == "turned" else np.eye(3),
+                           [0.0, 0.0, 0.0] if case == "turned" else [0.4, 0.0, 0.0])  # T_ref_cam of the other pose
+    p_kf, _ = camera.project(transform_points(np.linalg.inv(other), X))
+    if case == "look-alike":
+        here = np.c_[rng.uniform(20.0, 620.0, 12), rng.uniform(20.0, 460.0, 12)]
+        p_ref, p_kf = np.r_[p_ref, here], np.r_[p_kf, here + rng.normal(0.0, 0.3, (12, 2))]
+    monkeypatch.setattr(verification, "sift_matches", lambda image, ref, config: (p_kf, p_ref))
+    result = verify(view, [(np.zeros((480, 640)), np.eye(4), camera)])
+    assert result.other_pose_inliers >= 38 and result.disagreement_px > 50.0, result
+    if case == "look-alike":
+        assert result.verdict == "ambiguous" and result.agreeing >= 10 and result.T_correction is None, result
+        assert "two poses" in result.describe()
+    elif case == "elsewhere":
+        assert result.verdict == "failed" and result.T_correction is not None, result
+        assert np.allclose(result.T_correction, other, atol=0.01), result.T_correction
+    else:
+        assert result.verdict == "failed" and result.T_correction is None, result
