@@ -443,17 +443,16 @@ class RacrSession:
         left, else the end of the run with this verdict."""
         check = self._check
         if check is not None and verification is not None:
-            motion = None
+            motion, now = None, self._clock()
             if self._vse_pose is not None and self._hand_eye is not None:
-                motion = check.correction(verification, self._vse_pose[0], self._hand_eye.T_cam_hand, self._clock())
+                motion = check.correction(verification, self._vse_pose[0], self._hand_eye.T_cam_hand, now)
             if motion is not None:
                 self.verification = verification
                 self._motions_issued += 1
                 logger.info("rACR self-check failed (%s): correction %d of %d", verification.describe(),
                             check.corrections, self.verification_config.corrections)
                 M, T_ref_cam = motion
-                return MotionCommand(M, "correction", self._motions_issued, check.issued or self._clock(),
-                                     motion_gap(M), T_ref_cam)
+                return MotionCommand(M, "correction", self._motions_issued, now, motion_gap(M), T_ref_cam)
             verification = check.final(verification)
         self._converged = True
         self.verification = verification

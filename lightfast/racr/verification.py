@@ -217,7 +217,7 @@ def verify(view: ReferenceView, keyframes: Sequence[tuple[ArrayLike, ArrayLike, 
     docstring)."""
     cfg = view.config
     matches = agreeing = pnp_inliers = 0
-    starts = [np.eye(4)]  # the pooled fit starts at the estimate and at the best keyframe's PnP pose
+    pnp_start: Array | None = None  # the best keyframe's PnP pose, as a correction of the estimate
     matched: list[_Matches] = []
     agree: list[NDArray[np.bool_]] = []
     for image, T_ref_cam, cam in keyframes:
@@ -241,7 +241,9 @@ def verify(view: ReferenceView, keyframes: Sequence[tuple[ArrayLike, ArrayLike, 
         if found and inliers is not None and len(inliers) > max(pnp_inliers, cfg.min_other_pose - 1):
             pnp_inliers = len(inliers)
             # this keyframe's PnP pose T_cam_ref is the estimate's corrected by δ: T_cam_ref δ⁻¹
-            starts[1:] = [inverse(make_transform(cv2.Rodrigues(rvec)[0], tvec.ravel())) @ m.T_cam_ref]
+            pnp_start = inverse(make_transform(cv2.Rodrigues(rvec)[0], tvec.ravel())) @ m.T_cam_ref
+    # the pooled fit started at the estimate and at the PnP pose: the one with more matches within verify_px
+    starts = [None] if pnp_start is None else [None, pnp_start]
     support, moved, correction, inlier = max((_corrected_pose(view, matched, start) for start in starts),
                                               key=lambda fit: fit[0])
     if support >= cfg.min_other_pose and support > agreeing and moved > cfg.verify_px:
