@@ -25,7 +25,7 @@ from lightfast.eval.racr.records import RunRecord
 from lightfast.eval.racr.report import fmt
 from lightfast.eval.racr.run import initial_offset, run_one
 from lightfast.geometry import make_transform, rotation_angle_deg, so3_exp
-from lightfast.io import write_text_atomic
+from lightfast.io import json_finite, write_text_atomic
 from lightfast.sim.errors import PlatformError
 from lightfast.sim.racr_platform import PlatformSimulator
 
@@ -148,9 +148,9 @@ def run_convergence_study(scenes_dir: Path, out_dir: Path, scene: str = "S01", *
     out_dir.mkdir(parents=True, exist_ok=True)
     path = out_dir / "racr_convergence_condition.md"
     write_text_atomic(path, convergence_condition_markdown(scene, trials, full))
-    write_text_atomic(out_dir / "racr_convergence_condition.json", json.dumps(
-        {"scene": scene, "trials": [asdict(t) for t in trials], "full": [r.to_dict() for r in full]},
-        indent=1, default=float) + "\n")
+    write_text_atomic(out_dir / "racr_convergence_condition.json", json.dumps(json_finite(
+        {"scene": scene, "trials": [asdict(t) for t in trials], "full": [r.to_dict() for r in full]}),
+        indent=1, default=float, allow_nan=False) + "\n")
     import matplotlib
 
     matplotlib.use("Agg")

@@ -25,7 +25,7 @@ from lightfast.eval.racr.protocol import LIGHTINGS, METHODS, RacrEvalConfig, pro
 from lightfast.eval.racr.records import RunRecord, load_records, record_path
 from lightfast.eval.racr.report import write_outputs
 from lightfast.eval.racr.run import run_one
-from lightfast.io import write_text_atomic
+from lightfast.io import json_finite, write_text_atomic
 from lightfast.progress import track
 from lightfast.racr.node_config import RacrNodeConfig
 
@@ -99,7 +99,8 @@ def evaluate_racr(scenes_dir: Path, out_dir: Path, *, methods: Sequence[str] = t
     log.info("%d runs to do (%d already done)", len(todo), len(done))
 
     def finish(rec: RunRecord) -> None:
-        write_text_atomic(record_path(out_dir, rec), json.dumps(rec.to_dict(), indent=1) + "\n")
+        write_text_atomic(record_path(out_dir, rec),
+                          json.dumps(json_finite(rec.to_dict()), indent=1, allow_nan=False) + "\n")
         write_outputs(out_dir, load_records(out_dir, set(keys.values())), config, node)  # survives an interruption
         log.info("%s: AFD %.2f px (%s), %d adjustments, %.1f s simulated, %.0f s wall, %s", rec.key, rec.afd_px,
                  "ok" if rec.success else "FAIL", rec.adjustments, rec.time_loop_s, rec.wall_s, rec.stop_reason)

@@ -17,7 +17,7 @@ from __future__ import annotations
 import json
 import logging
 import math
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
@@ -88,11 +88,22 @@ class RunRecord:
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> RunRecord:
-        d = dict(d)
+        """A record as :meth:`to_dict` gave it, or as read back from JSON, where non-finite floats are ``null``."""
+        d = _nan_for_null(cls, d)
         d.pop("time_total_s", None)
         d.pop("time_to_success_s", None)
-        d["trace"] = [TracePoint(**t) for t in d.get("trace", [])]
+        d["trace"] = [TracePoint(**_nan_for_null(TracePoint, t)) for t in d.get("trace", [])]
         return cls(**d)
+
+
+def _nan_for_null(cls: type, d: dict[str, Any]) -> dict[str, Any]:
+    """``d`` with the ``None`` of ``cls``'s float fields as NaN (JSON has no NaN: records are written with
+    :func:`lightfast.io.json_finite`)."""
+    d = dict(d)
+    for f in fields(cls):
+        if f.type == "float" and f.name in d and d[f.name] is None:
+            d[f.name] = math.nan
+    return d
 
 
 def record_path(out_dir: Path, record: RunRecord) -> Path:

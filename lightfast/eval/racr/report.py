@@ -32,7 +32,7 @@ from lightfast.eval.racr.protocol import (
     RacrEvalConfig,
 )
 from lightfast.eval.racr.records import RunRecord
-from lightfast.io import write_text_atomic
+from lightfast.io import json_finite, write_text_atomic
 from lightfast.racr.node_config import RacrNodeConfig
 
 
@@ -196,6 +196,7 @@ def write_outputs(out_dir: Path, records: Sequence[RunRecord], config: RacrEvalC
     _write_csv(out_dir / "racr_runs.csv", runs)
     summary = {"config": config.to_dict(), "node": node.to_dict(), "runs": len(runs), "per_method": summarize(runs),
                "done_means": done_means(runs)}
-    write_text_atomic(out_dir / "racr_summary.json", json.dumps(summary, indent=1, default=float) + "\n")
+    write_text_atomic(out_dir / "racr_summary.json",
+                      json.dumps(json_finite(summary), indent=1, default=float, allow_nan=False) + "\n")
     _plots(out_dir, runs)
 

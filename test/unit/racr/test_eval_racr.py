@@ -83,6 +83,22 @@ def test_runs_are_scored_from_the_truth_and_recorded(evaluated) -> None:
     assert len((out / "racr_runs.csv").read_text().strip().splitlines()) == 4
 
 
+def test_records_and_summary_are_standard_json(evaluated) -> None:
+    """No NaN or Infinity in the files (not JSON; other readers refuse them): ACR's gap g is NaN in memory, null in
+    its record, and NaN again when the record is read back."""
+    out, runs, _ = evaluated
+
+    def refuse(constant: str) -> None:
+        raise ValueError(f"non-standard JSON constant {constant}")
+
+    for path in [*(out / "runs").glob("*.json"), out / "racr_summary.json"]:
+        json.loads(path.read_text(), parse_constant=refuse)
+    acr = next(r for r in runs if r.method == "acr")
+    assert math.isnan(acr.trace[0].g)
+    loaded = {r.key: r for r in load_records(out)}[acr.key]
+    assert math.isnan(loaded.trace[0].g) and loaded.afd_px == acr.afd_px
+
+
 def test_the_evaluation_resumes_without_repeating_runs(evaluated, scenes_dir: Path) -> None:
     out, _, _ = evaluated
     again = []
