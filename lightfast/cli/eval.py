@@ -72,7 +72,7 @@ def _cmd_eval_racr(args: argparse.Namespace) -> int:
 
 
 def _cmd_eval_vtr(args: argparse.Namespace) -> int:
-    from lightfast.config import config_from_mapping
+    from lightfast.config import load_config_yaml, replace_config
     from lightfast.eval.vtr import evaluate_vtr
     from lightfast.vtr.localizer_config import VtrLocalizerConfig
 
@@ -82,8 +82,10 @@ def _cmd_eval_vtr(args: argparse.Namespace) -> int:
     if args.jobs < 1:
         args.parser.error("--jobs must be >= 1")
     try:
-        config = config_from_mapping(VtrLocalizerConfig, {"teach.workers": args.workers, "repeat.workers": args.workers,
-                                                          "repeat.initial_keyframe": args.initial_keyframe})
+        base = (load_config_yaml(VtrLocalizerConfig, args.params_file, node_name="vtr_localizer_node")
+                if args.params_file else VtrLocalizerConfig())
+        config = replace_config(base, {"teach.workers": args.workers, "repeat.workers": args.workers,
+                                       "repeat.initial_keyframe": args.initial_keyframe})
     except LightfastError as exc:
         args.parser.error(str(exc))
     logging.getLogger(evaluate_vtr.__module__).setLevel(logging.INFO)  # one line per finished run
@@ -189,6 +191,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--max-frames", type=int, default=None, help="evaluate only the first N frames of each repeat")
     p.add_argument("--jobs", type=int, default=1, help="parallel worker processes, one (run, mode) each (default 1)")
     p.add_argument("--workers", type=int, default=1, help="threads of each pipeline's stereo front end (default 1)")
+    p.add_argument("--params-file", type=Path, default=None, metavar="YAML",
+                   help="vtr_localizer_node parameter file to teach and repeat with (default: the node's defaults, as "
+                   "in config/vtr_localizer_node.yaml); --workers, --initial-keyframe and each mode replace theirs")
     p.add_argument("--initial-keyframe", type=int, default=-1, help="keyframe where every repeat starts (default -1, "
                    "the node's default: search the whole map for the first localization; 0: the repeat starts at "
                    "the start of the taught path, as in a field trial)")

@@ -19,7 +19,7 @@ keypoint once); then, by ``RepeatConfig.mode``:
 Success needs ``min_inliers`` (§IV-C: six) inliers after outlier rejection and two checks added to the paper's rule
 (six inliers alone accepted wrong poses on synthetic scenes, see ``docs/vtr.md``): a constrained camera position
 (``max_position_std_m``, from the pose covariance at a nominal 1 px noise: rejects poses resting on far points
-only) and, with a prior, a position within ``max_deviation_m`` (the repeat's prior gate) of the prior's. Output:
+only) and, with a prior, a position the repeat's :class:`PriorGate` admits. Output:
 :class:`Localization` — the camera pose ``T_ref_cam`` in keyframe ``ref_index``'s frame (4×4; metres, REP-103
 optical axes), success, matches and inliers per source, RMS reprojection error (px), covariance. The whole-map
 search over every keyframe is :mod:`lightfast.vtr.map_search`.
@@ -44,7 +44,7 @@ from lightfast.vtr.map_store import TeachMap
 from lightfast.vtr.pose_estimation import StereoCamera, estimate_pose_stereo
 from lightfast.vtr.repeat_config import RepeatConfig
 
-__all__ = ["FeatureSupplier", "Localization", "MapLocalizer"]
+__all__ = ["FeatureSupplier", "Localization", "MapLocalizer", "PriorGate"]
 
 log = logging.getLogger(__name__)
 
@@ -72,6 +72,30 @@ class Localization:
 
 
 FeatureSupplier = Callable[[], Mapping[str, StereoFeatures]]
+
+
+@dataclass(frozen=True)
+class PriorGate:
+    """Where a windowed localization may put the camera relative to its VO prior: within ``radius_m`` of the prior's
+    position, or within ``sigmas`` standard deviations of the prior's own position uncertainty ``position_cov``
+    (3×3, m², in the reference keyframe's frame; a Mahalanobis distance): a VO step resting on far points is
+    uncertain along the optical axis, and the localization that mends it lies there."""
+
+    radius_m: float = math.inf
+    position_cov: NDArray[np.float64] | None = None
+    sigmas: float = 0.0
+
+    def admits(self, offset_m: NDArray[np.float64]) -> bool:
+        """Whether a localization ``offset_m`` (3,) from the prior's position passes."""
+        if float(np.linalg.norm(offset_m)) <= self.radius_m:
+            return True
+        if self.position_cov is None or self.sigmas <= 0.0 or not np.all(np.isfinite(self.position_cov)):
+            return False
+        try:
+            d2 = float(offset_m @ np.linalg.solve(self.position_cov, offset_m))
+        except np.linalg.LinAlgError:
+            return False
+        return d2 <= self.sigmas**2
 
 
 @dataclass(frozen=True)
@@ -156,11 +180,11 @@ class MapLocalizer:
 
     def localize_sources(
         self, features: Mapping[str, StereoFeatures], sources: Sequence[str], camera: StereoCamera, ref: int,
-        window: Sequence[int], T_ref_cam_prior: NDArray[np.float64] | None, max_deviation_m: float = math.inf,
+        window: Sequence[int], T_ref_cam_prior: NDArray[np.float64] | None, gate: PriorGate | None = None,
     ) -> Localization:
         """Match each of ``sources`` separately, fuse all matches into ONE RANSAC + ONE refinement; success with
         ``min_inliers`` inliers, a well-constrained position (``max_position_std_m``) and, with a prior, a position
-        within ``max_deviation_m`` of the prior's."""
+        the ``gate`` admits."""
         c = self.config
         objs, imgs, disps, dists, labels, matches = [], [], [], [], [], {}
         for k, s in enumerate(sources):
@@ -190,23 +214,22 @@ class MapLocalizer:
             log.debug("localization at keyframe %d rejected: %d inliers but position std %.2f m", ref,
                       est.num_inliers, est.position_std_m)
         gated = False
-        if success and T_ref_cam_prior is not None:
-            deviation = float(np.linalg.norm(est.T_ref_cur[:3, 3] - T_ref_cam_prior[:3, 3]))
-            if deviation > max_deviation_m:
+        if success and T_ref_cam_prior is not None and gate is not None:
+            offset = est.T_ref_cur[:3, 3] - T_ref_cam_prior[:3, 3]
+            if not gate.admits(offset):
                 success, gated = False, True
                 log.debug("localization at keyframe %d rejected: %d inliers but %.2f m from the VO prior (gate "
-                          "%.2f m)", ref, est.num_inliers, deviation, max_deviation_m)
+                          "%.2f m)", ref, est.num_inliers, float(np.linalg.norm(offset)), gate.radius_m)
         return Localization(est.T_ref_cur if success or gated else np.eye(4), ref, success, inliers, matches,
                             est.rms_px, est.covariance if success or gated else np.full((6, 6), np.inf), gated)
 
     def localize(
         self, features: Mapping[str, StereoFeatures], camera: StereoCamera, ref: int, window: Sequence[int],
         T_ref_cam_prior: NDArray[np.float64] | None, more: FeatureSupplier | None = None,
-        max_deviation_m: float = math.inf,
+        gate: PriorGate | None = None,
     ) -> Localization:
         """Localize by the configured mode (module docstring). ``more`` supplies the colour-constant
         sources on demand in ``mcmanus`` mode (default: they must be in ``features``)."""
-        gate = max_deviation_m
         if self.config.mode != "mcmanus":
             return self._complete(self.localize_sources(features, self.sources, camera, ref, window,
                                                         T_ref_cam_prior, gate))

@@ -31,7 +31,6 @@ relocalizing) and before the first localization: the frames on which the robot w
 from __future__ import annotations
 
 import logging
-import math
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
@@ -43,7 +42,7 @@ from lightfast.config import ConfigError, config_from_mapping
 from lightfast.vtr.color_constant import ColorConstantConfig
 from lightfast.vtr.errors import VtrInputError
 from lightfast.vtr.features import StereoFeatures
-from lightfast.vtr.localization import FeatureSupplier, Localization, MapLocalizer
+from lightfast.vtr.localization import FeatureSupplier, Localization, MapLocalizer, PriorGate
 from lightfast.vtr.map_store import TeachMap
 from lightfast.vtr.pose_estimation import StereoCamera
 from lightfast.vtr.repeat_config import RepeatConfig
@@ -202,8 +201,9 @@ class RepeatPipeline:
         if self._T_ref_cam is not None:
             ref, prior = self._reanchor(self._ref, self._T_ref_cam @ motion)
             if self._cov is not None:
+                step_cov = c.vo_cov_scale**2 * vo.covariance if (c.vo_cov_scale > 0 and vo.success) else None
                 prior_cov = propagate_covariance(self._cov, motion, step_m, c.vo_position_noise_per_m,
-                                                 c.vo_rotation_noise_deg_per_m)
+                                                 c.vo_rotation_noise_deg_per_m, step_cov)
                 if ref != self._ref:
                     prior_cov = add_keyframe_noise(prior_cov, c.keyframe_position_noise_m,
                                                    c.keyframe_rotation_noise_deg)
@@ -215,9 +215,14 @@ class RepeatPipeline:
             self._distance_on_vo_m + step_m <= c.max_distance_on_vo_m)
         t = time.perf_counter()
         if prior is not None and not self._lost:
-            gate = math.inf
+            gate = None
             if c.prior_gate_m > 0:
-                gate = c.prior_gate_m + c.prior_gate_per_m * (self._distance_on_vo_m + step_m)
+                position_cov = None
+                if prior_cov is not None:
+                    R = prior[:3, :3]
+                    position_cov = R @ prior_cov[:3, :3] @ R.T
+                gate = PriorGate(c.prior_gate_m + c.prior_gate_per_m * (self._distance_on_vo_m + step_m),
+                                 position_cov, c.prior_gate_sigmas)
             loc = self.localizer.localize(features, camera, ref, self.map.window(ref, c.window_radius), prior, more,
                                           gate)
             localized = loc.success or self._confirmed(loc, motion)

@@ -86,6 +86,14 @@ class RepeatConfig(Config):
     prior_gate_per_m: float = param(
         0.1, description="Growth of the prior gate per metre driven on VO alone (allowed VO drift), m/m.", min=0.0,
     )
+    prior_gate_sigmas: float = param(
+        0.0, description="The prior gate also admits a localization within this many standard deviations of the VO "
+        "prior's own position uncertainty (Mahalanobis; a VO step resting on far points is uncertain along the "
+        "optical axis, and the localization that mends it lies there). 0: the radius alone. Off: at 3 it mended "
+        "development route 45863's sunset VO errors (7.3 m instead of 18.0 m > 1 m off after the first "
+        "localizations of repeats 06/07/10) but admitted localizations ~1 m off on route 14489 and wrong greyscale "
+        "ones in the unit test's changed lighting (docs/vtr.md).", min=0.0,
+    )
     confirm_beyond_gate_inliers: int = param(
         30, description="Accept a windowed localization beyond the prior gate when it and the previous frame's, also "
         "beyond the gate, have at least this many inliers and agree within prior_gate_m after the VO motion between "
@@ -102,6 +110,13 @@ class RepeatConfig(Config):
         "noise), for the fusion: the nominal one ignores landmark depth noise and the teach edges of the window "
         "(development route 7: errors over 1 m scored a median NEES of ~600 against it; 3-5 fused well, 10 trusted "
         "VO too much).", min=1e-3,
+    )
+    vo_cov_scale: float = param(
+        2.0, description="Standard deviations of a VO step added to the prior's covariance = this x those of the "
+        "step's nominal covariance (1 px noise; 0: the per-metre VO noise alone). At sunset on development route "
+        "45863 VO steps resting on landmarks 50-60 m away were 0.3-1.4 m off; their nominal covariance tracks the "
+        "error (correlation 0.65-0.69) but is too small (median NEES 5-10 for 3 position DOF). 2 vs 0, fused, "
+        "strict manual distance: route 45863 repeats 06/07/10 77.2 vs 81.4 m, route 14489 11.4 vs 13.6 m.", min=0.0,
     )
     vo_position_noise_per_m: float = param(
         0.06, description="VO position noise (standard deviation) per metre driven, for the prior's covariance, m/m.",

@@ -10,8 +10,8 @@ fallback when the guided attempt finds fewer than ``min_inliers`` inliers. The m
 reprojection error); a motion longer than ``max_translation_m`` is rejected.
 
 Output per frame: :class:`VoResult` — ``T_prev_cur`` (4×4, current left camera frame → previous one; metres, REP-103
-optical axes), matches, inliers, the inliers' RMS reprojection error (px) and success; on a failure ``T_prev_cur`` is
-the constant-velocity prediction, on the first frame the identity.
+optical axes), matches, inliers, the inliers' RMS reprojection error (px), the motion's nominal covariance (1 px
+noise) and success; on a failure ``T_prev_cur`` is the constant-velocity prediction, on the first frame the identity.
 """
 from __future__ import annotations
 
@@ -65,7 +65,9 @@ class VoResult:
     """One VO step: ``T_prev_cur`` (current left camera frame → previous one, m), matches and inliers, success.
 
     On the first frame (no previous one) ``T_prev_cur`` is the identity and ``first`` is set; on a failure it is
-    the constant-velocity prediction (``success`` False)."""
+    the constant-velocity prediction (``success`` False). ``covariance`` (6×6) is that of ξ in ``T_prev_cur ·
+    exp(ξ)`` at the nominal 1 px noise (:class:`~lightfast.vtr.pose_estimation.PoseEstimate`; infinite without a
+    successful estimate)."""
 
     T_prev_cur: NDArray[np.float64]
     success: bool
@@ -74,6 +76,7 @@ class VoResult:
     guided: bool
     first: bool = False
     rms_px: float = field(default=float("nan"))
+    covariance: NDArray[np.float64] = field(default_factory=lambda: np.full((6, 6), np.inf))
 
 
 class VisualOdometry:
@@ -126,7 +129,8 @@ class VisualOdometry:
             if est.success and not success:
                 log.debug("VO rejected: %.2f m between frames exceeds %.2f m", step_m, c.max_translation_m)
             if success:
-                return VoResult(est.T_ref_cur, True, len(i_ref), est.num_inliers, guided, rms_px=est.rms_px)
+                return VoResult(est.T_ref_cur, True, len(i_ref), est.num_inliers, guided, rms_px=est.rms_px,
+                                covariance=est.covariance)
             result = VoResult(self._velocity.copy(), False, len(i_ref), est.num_inliers, guided)
         return result
 

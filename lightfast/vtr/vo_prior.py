@@ -40,11 +40,15 @@ def _diagonal(position_std_m: float, rotation_std_rad: float) -> Array:
 
 
 def propagate_covariance(P: Array, T_prev_cur: Array, step_m: float, position_noise_per_m: float,
-                         rotation_noise_deg_per_m: float) -> Array:
+                         rotation_noise_deg_per_m: float, step_covariance: Array | None = None) -> Array:
     """The covariance of ``T_ref_cur = T_ref_prev · T_prev_cur`` from that of ``T_ref_prev``, with VO noise of
-    ``position_noise_per_m`` m and ``rotation_noise_deg_per_m`` degrees (standard deviations) per metre driven."""
+    ``position_noise_per_m`` m and ``rotation_noise_deg_per_m`` degrees (standard deviations) per metre driven, plus
+    the VO step's own covariance ``step_covariance`` (of ξ in ``T_prev_cur · exp(ξ)``) when given and finite."""
     A = adjoint(inverse(T_prev_cur))
-    return A @ P @ A.T + _diagonal(position_noise_per_m * step_m, math.radians(rotation_noise_deg_per_m) * step_m)
+    Q = _diagonal(position_noise_per_m * step_m, math.radians(rotation_noise_deg_per_m) * step_m)
+    if step_covariance is not None and np.all(np.isfinite(step_covariance)):
+        Q = Q + 0.5 * (step_covariance + step_covariance.T)
+    return A @ P @ A.T + Q
 
 
 def add_keyframe_noise(P: Array, position_std_m: float, rotation_std_deg: float) -> Array:

@@ -159,3 +159,11 @@ def test_bad_inputs(sim_dir, tmp_path, capsys):
     with pytest.raises(SystemExit):
         cli.main(["eval", "vtr", str(sim_dir), str(tmp_path / "o"), "--jobs", "0"])
     assert "--jobs must be >= 1" in capsys.readouterr().err
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("/**:\n  ros__parameters:\n    repeat:\n      prior_gate_sigmas: -1.0\n")
+    with pytest.raises(SystemExit):
+        cli.main(["eval", "vtr", str(sim_dir), str(tmp_path / "o"), "--params-file", str(bad)])
+    assert "prior_gate_sigmas" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        cli.main(["eval", "vtr", str(sim_dir), str(tmp_path / "o"), "--params-file", str(tmp_path / "none.yaml")])
+    assert "no parameter file" in capsys.readouterr().err

@@ -668,6 +668,33 @@ def test_a_weak_place_of_the_search_needs_the_next_frame(taught: Taught, repeat_
         rp.close()
 
 
+def test_a_vo_step_gone_astray_along_the_optical_axis_is_mended_when_the_step_says_so(taught: Taught,
+                                                                                     repeat_features):
+    """A VO step 0.8 m too long along the optical axis puts the prior beyond the 0.63 m gate radius of the correct
+    localization. When the step's own covariance says it is 0.5 m uncertain along that axis (a step resting on far
+    points), the gate admits the localization (1.6 sigma) and the pose is mended; when the step claims 1 cm, or
+    without prior_gate_sigmas, the localization is refused and the pose stays 0.8 m off."""
+    from lightfast.vtr.visual_odometry import VoResult
+
+    camera = StereoCamera.from_projections(P_LEFT, P_RIGHT)
+    feats = repeat_features["teach"]
+    true_motion = np.linalg.inv(pose(REPEAT_X, REPEAT_Z[12], REPEAT_YAW_DEG)) @ pose(REPEAT_X, REPEAT_Z[13],
+                                                                                     REPEAT_YAW_DEG)
+    astray = true_motion.copy()
+    astray[2, 3] += 0.8
+    first = VoResult(np.eye(4), True, 0, 0, False, first=True)
+    for z_std, sigmas, mended in ((0.5, 3.0, True), (0.01, 3.0, False), (0.5, 0.0, False)):
+        step = VoResult(astray, True, 50, 50, True, covariance=np.diag([0.01**2, 0.01**2, z_std**2] + [1e-8] * 3))
+        rp = RepeatPipeline(taught.teach_map, _repeat_config("fused", search_accept_inliers=0, vo_cov_scale=1.0,
+                                                             prior_gate_sigmas=sigmas))
+        assert rp._localize_step(0, first, feats[12], camera, None).localized
+        b = rp._localize_step(STAMP_STEP_NS, step, feats[13], camera, None)
+        kf_z = taught.kf_pose[b.keyframe_index][2, 3]
+        error_m = abs(kf_z + b.T_kf_cam[2, 3] - REPEAT_Z[13])
+        assert b.localized == mended and (error_m < 0.1 if mended else error_m > 0.7), (z_std, sigmas, error_m)
+        rp.close()
+
+
 def test_repeat_step_on_images_and_mcmanus_lazy_sources(taught: Taught, scene: Scene):
     """The node-facing call (images in) in every mode; mcmanus computes F_v/F_r only when grey fails."""
     rng = np.random.default_rng(30)

@@ -69,3 +69,17 @@ def test_a_localization_without_a_covariance_is_kept_as_it_is() -> None:
 def test_keyframe_noise_adds_on_the_diagonal() -> None:
     P = add_keyframe_noise(np.zeros((6, 6)), 0.1, 0.15)
     np.testing.assert_allclose(np.diag(P), [0.01] * 3 + [np.radians(0.15) ** 2] * 3)
+
+
+def test_the_vo_steps_own_covariance_is_added_where_it_is_uncertain() -> None:
+    """A VO step resting on far points: its nominal covariance is 0.5 m along the optical axis, 2 cm across. The
+    prior's covariance gains it on top of the per-metre noise, in the current frame; a step without an estimate
+    (infinite covariance) adds the per-metre noise only."""
+    motion = make_transform(np.eye(3), [0.0, 0.0, 0.8])
+    step = np.diag([0.02**2, 0.02**2, 0.5**2, 1e-6, 1e-6, 1e-6])
+    base = propagate_covariance(np.zeros((6, 6)), motion, 0.8, 0.06, 0.2)
+    with_step = propagate_covariance(np.zeros((6, 6)), motion, 0.8, 0.06, 0.2, step)
+    np.testing.assert_allclose(with_step - base, step, atol=1e-15)
+    assert np.sqrt(with_step[2, 2]) > 0.5 > 10 * np.sqrt(base[2, 2])
+    np.testing.assert_array_equal(propagate_covariance(np.zeros((6, 6)), motion, 0.8, 0.06, 0.2,
+                                                       np.full((6, 6), np.inf)), base)

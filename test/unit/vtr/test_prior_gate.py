@@ -1,0 +1,27 @@
+"""The prior gate of a windowed localization (:class:`lightfast.vtr.localization.PriorGate`): a radius, widened along
+the directions in which the VO prior itself is uncertain."""
+from __future__ import annotations
+
+import numpy as np
+
+from lightfast.vtr.localization import PriorGate
+
+
+def test_the_radius_alone_without_a_covariance() -> None:
+    gate = PriorGate(0.5)
+    assert gate.admits(np.array([0.3, 0.0, 0.3]))
+    assert not gate.admits(np.array([0.0, 0.0, 0.6]))
+    assert not PriorGate(0.5, np.diag([1.0, 1.0, 1.0]), sigmas=0.0).admits(np.array([0.0, 0.0, 0.6]))
+
+
+def test_the_gate_widens_along_the_priors_uncertain_axis_only() -> None:
+    """The prior is 0.5 m uncertain along z (a VO step on far points), 5 cm across: a localization 1.2 m along z
+    (2.4 sigma) is admitted at 3 sigma, one 1.2 m sideways (24 sigma) is not; at 2 sigma neither; an infinite or
+    singular covariance falls back to the radius."""
+    cov = np.diag([0.05**2, 0.05**2, 0.5**2])
+    along, across = np.array([0.0, 0.0, 1.2]), np.array([1.2, 0.0, 0.0])
+    gate = PriorGate(0.5, cov, sigmas=3.0)
+    assert gate.admits(along) and not gate.admits(across)
+    assert not PriorGate(0.5, cov, sigmas=2.0).admits(along)
+    assert not PriorGate(0.5, np.full((3, 3), np.inf), sigmas=3.0).admits(along)
+    assert not PriorGate(0.5, np.zeros((3, 3)), sigmas=3.0).admits(along)
