@@ -3,7 +3,8 @@
 The repeat keeps a belief of the camera pose in its reference keyframe's frame — the pose ``T_ref_cam`` and a 6×6
 covariance of ``ξ = (ρ, φ)`` in ``T_ref_cam · exp(ξ)`` (camera frame, m and rad, the convention of
 :class:`~lightfast.vtr.localization.Localization`). Between localizations the VO motion ``M = T_prev_cur`` carries
-it: ``ξ_cur = Ad(M⁻¹) ξ_prev`` plus VO noise growing with the distance driven (:func:`propagate_covariance`); a
+it: ``ξ_cur = Ad(M⁻¹) ξ_prev`` plus VO noise growing with the distance driven and the step's own (scaled) covariance
+(:func:`propagate_covariance`: a step resting on far landmarks is uncertain along the optical axis); a
 change of reference keyframe adds the uncertainty of a teach edge (:func:`add_keyframe_noise`). An accepted windowed
 localization is then fused with the prior in information form (:func:`fuse`, one Gauss–Newton step of the two
 quadratic terms), instead of replacing it: a localization resting on far landmarks constrains the camera's position
