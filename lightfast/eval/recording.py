@@ -68,7 +68,9 @@ class RecordingScore:
             f"throughput {self.fps:.1f} poses/s; latency image stamp -> /tracker/pose: median "
             f"{np.median(lat) if len(lat) else math.nan:.1f} ms, p95 "
             f"{np.percentile(lat, 95) if len(lat) else math.nan:.1f} ms",
-            f"sun update streaming meanwhile: {self.sun_chunks} chunks of {self.sun_epochs} epochs",
+            f"sun update streaming meanwhile: {self.sun_chunks} chunks of {self.sun_epochs} epochs" if self.sun_chunks
+            else "sun update: no B̂_sun chunk published while the poses were (expected when its update period is "
+                 "longer than the recording)",
         ]
         return "\n".join(lines) + "\n" + self.stage_table()
 
