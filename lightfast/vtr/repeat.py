@@ -217,8 +217,8 @@ class RepeatPipeline:
         if prior is not None and not self._lost:
             gate = None
             if c.prior_gate_m > 0:
-                position_cov = None
-                if prior_cov is not None:
+                position_cov = None  # only the Mahalanobis widening reads it
+                if prior_cov is not None and c.prior_gate_sigmas > 0:
                     R = prior[:3, :3]
                     position_cov = R @ prior_cov[:3, :3] @ R.T
                 gate = PriorGate(c.prior_gate_m + c.prior_gate_per_m * (self._distance_on_vo_m + step_m),
