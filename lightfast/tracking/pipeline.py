@@ -38,7 +38,14 @@ from lightfast.config import ConfigError, param
 from lightfast.geometry import make_transform, quat_to_matrix, rotation_angle_deg
 from lightfast.node_options import SensorInputOptions, StampOptions
 from lightfast.tracking.errors import TrackingError, TrackingInputError
-from lightfast.tracking.rgbd_odometry import AlignResult, RGBDFrame, TrackingConfig, align_frames, prepare_frame
+from lightfast.tracking.rgbd_odometry import (
+    AlignResult,
+    RGBDFrame,
+    TrackingConfig,
+    align_frames,
+    prepare_frame,
+    repeated_input,
+)
 
 __all__ = ["CoarseEstimate", "F2FJob", "F2MJob", "RGBDTracker", "TrackResult", "TrackerConfig", "f2m_rejection"]
 
@@ -147,12 +154,14 @@ class TrackerConfig(TrackingConfig, SensorInputOptions, StampOptions):
 
 @dataclass(frozen=True, eq=False)
 class CoarseEstimate:
-    """Result of f2f tracking for one frame: ``T_map_cam`` is T≈ (where the reference is to be rendered)."""
+    """Result of f2f tracking for one frame: ``T_map_cam`` is T≈ (where the reference is to be rendered);
+    ``repeated``: which image repeats the previous frame's (:func:`~lightfast.tracking.repeated_input`)."""
 
     stamp_ns: int
     T_map_cam: NDArray[np.float64]
-    f2f: AlignResult | None  # None for the first frame after a reset
+    f2f: AlignResult | None  # None for the first frame after a reset and a frame whose depth repeats
     seconds: float
+    repeated: str = ""
 
 
 @dataclass(frozen=True, eq=False)
@@ -184,7 +193,8 @@ class _Pending:
 class F2FJob:
     """The f2f alignment of a new live frame (:meth:`RGBDTracker.start_coarse`): prepare the frame and align it to
     the previous one from the constant-velocity prediction. :meth:`run` reads only the job's own inputs; its outcome
-    is ``frame`` and ``result`` (None for the first frame after a reset) or ``error``."""
+    is ``frame``, ``repeated`` and ``result`` (None for the first frame after a reset and for a frame whose depth
+    image repeats the previous one's: not aligned; E_G alone when only the colour repeats) or ``error``."""
 
     stamp_ns: int
     rgb: ArrayLike
@@ -195,6 +205,7 @@ class F2FJob:
     T_prev_cur_init: NDArray[np.float64] | None
     frame: RGBDFrame | None = None
     result: AlignResult | None = None
+    repeated: str = ""
     error: TrackingError | None = None
     seconds: float = 0.0
 
@@ -204,8 +215,11 @@ class F2FJob:
         try:
             self.frame = prepare_frame(self.rgb, self.depth_m, self.camera, config=cfg, name=f"frame {self.stamp_ns}")
             if self.previous is not None:
-                self.result = align_frames(self.frame, self.previous[1], init_T_target_source=self.T_prev_cur_init,
-                                           config=cfg.f2f_config, use_color=cfg.f2f_color, use_depth=True)
+                self.repeated = repeated_input(self.frame, self.previous[1])
+                if self.repeated != "depth":
+                    self.result = align_frames(
+                        self.frame, self.previous[1], init_T_target_source=self.T_prev_cur_init,
+                        config=cfg.f2f_config, use_color=cfg.f2f_color and self.repeated != "colour", use_depth=True)
         except TrackingError as exc:
             self.error = exc
         self.seconds = time.perf_counter() - t0
@@ -250,7 +264,8 @@ class RGBDTracker:
         self.camera = camera
         self.config = TrackerConfig() if config is None else config
         self._pending: OrderedDict[int, _Pending] = OrderedDict()
-        self._last: tuple[int, RGBDFrame, NDArray[np.float64]] | None = None  # stamp, frame, best pose
+        self._last: tuple[int, RGBDFrame, NDArray[np.float64]] | None = None  # f2f target: stamp, frame, best pose
+        self._last_stamp: int | None = None  # of the last frame (after _last's when its depth repeated _last's)
         self._T_start: NDArray[np.float64] | None = None
         self._velocity = np.eye(4)  # T_prev_cur of the last f2f step (the constant-velocity prior)
 
@@ -270,11 +285,11 @@ class RGBDTracker:
             raise TrackingInputError(f"reset pose must be a finite 4x4 matrix, got shape {T.shape}")
         self._pending.clear()
         self._velocity = np.eye(4)
-        if stamp_ns is not None and self._last is not None and self._last[0] == int(stamp_ns):
+        if stamp_ns is not None and self._last is not None and self._last_stamp == int(stamp_ns):
             self._last = (self._last[0], self._last[1], T.copy())
-            self._T_start = None
+            self._T_start = None  # (a frame whose depth repeated _last's has _last's pose)
         else:
-            self._last = None
+            self._last = self._last_stamp = None
             self._T_start = T.copy()
 
     def track_coarse(self, stamp_ns: int, rgb: ArrayLike, depth_m: ArrayLike) -> CoarseEstimate:
@@ -289,8 +304,8 @@ class RGBDTracker:
         if not self.initialized:
             raise TrackingInputError("tracker has no start pose: call reset(T_map_cam) first")
         stamp = int(stamp_ns)
-        if self._last is not None and stamp <= self._last[0]:
-            raise TrackingInputError(f"frame stamp {stamp} is not after the previous frame's {self._last[0]}")
+        if self._last_stamp is not None and stamp <= self._last_stamp:
+            raise TrackingInputError(f"frame stamp {stamp} is not after the previous frame's {self._last_stamp}")
         cfg = self.config
         prev = None if self._last is None else self._last[:2]
         init = self._velocity if cfg.motion_prior == "constant-velocity" else None
@@ -313,13 +328,17 @@ class RGBDTracker:
             prev_stamp = job.previous[0]
             if self._last is None or self._last[0] != prev_stamp or self._last[1] is not job.previous[1]:
                 raise TrackingInputError(f"frame {stamp}: the tracker was reset or moved on while it was tracked")
-            assert res is not None
-            T_rel = res.T_target_source
-            self._velocity = T_rel if res.converged else np.eye(4)
+            if res is None:  # the depth repeats the previous frame's: no motion measured; it stays the f2f target
+                T_rel = np.eye(4)
+            else:
+                T_rel = res.T_target_source
+                self._velocity = T_rel if res.converged else np.eye(4)
             T = self._last[2] @ T_rel
         self._pending[stamp] = _Pending(job.frame, T.copy(), T.copy(), prev_stamp, T_rel, res, job.seconds)
-        self._last = (stamp, job.frame, T.copy())
-        return CoarseEstimate(stamp, T, res, job.seconds)
+        if job.repeated != "depth":
+            self._last = (stamp, job.frame, T.copy())
+        self._last_stamp = stamp
+        return CoarseEstimate(stamp, T, res, job.seconds, job.repeated)
 
     def expired(self) -> list[int]:
         """Stamps of pending frames beyond ``max_pending`` (oldest first): finish them with :meth:`skip_reference`."""

@@ -54,11 +54,12 @@ def test_the_benchmark_runs_on_another_folder_numbered_from_500(sevenscenes_dir:
     for sub in (summary["subsequences"], summary["subsequences_registered"]):  # raw and registered colour
         assert sub["stretches"] == [[FIRST + 2, FIRST + 5], [FIRST + 6, FIRST + 9]]
         assert {(r["method"], r["resolution"]) for r in sub["rows"]} == {
-            (m, size) for m in (bench.O3D_TENSOR, bench.O3D_LEGACY, bench.EQ7, bench.DEPTH_DIFF)
+            (m, size) for m in (bench.O3D_TENSOR, bench.O3D_LEGACY, bench.O3D_TENSOR_SKIP, bench.O3D_LEGACY_SKIP,
+                                bench.EQ7, bench.DEPTH_DIFF)
             for size in ("160×120", "80×60")}
         for row in sub["rows"]:
             assert len(row["ate_cm"]) == 2 and all(math.isfinite(a) and a < 5.0 for a in row["ate_cm"]), row
-            assert ("ahead_of_both" in row) == row["method"].startswith("lightfast")
+            assert ("ahead_of_both" in row) == ("ahead_of_both_same_rule" in row) == row["method"].startswith("lightfast")
     assert summary["subsequences_registered"]["colour"].startswith("colour registered (scale 0.")
     report = out.read_text()
     assert f"Frames {FIRST + 2}–{FIRST + 9} of `" in report and "## Sub-sequences of 4 frames" in report

@@ -15,12 +15,14 @@ from numpy.typing import NDArray
 
 from lightfast.config import Config, ConfigError, param
 
-__all__ = ["GEOMETRIC_TERMS", "TRACKING_MODES", "AlignResult", "SequenceTrack", "TrackingConfig"]
+__all__ = ["GEOMETRIC_TERMS", "ROBUST_NORMS", "TRACKING_MODES", "AlignResult", "SequenceTrack", "TrackingConfig"]
 
 #: Tracking variants of paper §IV: the proposed method and its baselines.
 TRACKING_MODES = ("proposed", "refl-f2m", "depth-only", "no-color-f2m")
 #: Forms of the geometric term E_G (see :mod:`lightfast.tracking.rgbd_odometry.kernels`).
 GEOMETRIC_TERMS = ("point-to-plane", "depth-difference")
+#: Robust norms of the residuals (see :mod:`lightfast.tracking.rgbd_odometry.kernels`).
+ROBUST_NORMS = ("huber", "t-distribution")
 
 
 @dataclass(frozen=True)
@@ -38,6 +40,13 @@ class TrackingConfig(Config):
         "[10], the paper's) or depth-difference along the reference ray (Kerl et al., DVO; Open3D's hybrid term).",
         choices=GEOMETRIC_TERMS,
     )
+    robust_norm: str = param(
+        "huber", description="Robust norm of both terms: Huber with the thresholds below, or Student's t with its "
+        "scale fitted to each term's residuals at every Gauss-Newton step (Kerl et al., ICRA 2013); then w_G weighs "
+        "the two normalised terms.", choices=ROBUST_NORMS,
+    )
+    t_dof: float = param(5.0, description="Degrees of freedom of the t-distribution (robust_norm t-distribution).",
+                         min=0.5)
     pyramid_levels: int = param(3, description="Image pyramid levels (factor 2 each).", min=1, max=6)
     iterations: tuple[int, ...] = param(
         (10, 5, 3), description="Gauss-Newton iterations per pyramid level, coarse to fine.", min=1, max=200
@@ -113,9 +122,9 @@ class AlignResult:
 @dataclass(frozen=True)
 class SequenceTrack:
     """Frame-to-frame tracking of a sequence: ``poses[i]`` is ``T_world_cam`` of frame ``i`` (``poses[0]`` the
-    given start pose), ``results[i-1]`` the alignment of frame ``i`` to frame ``i-1``, ``seconds[i-1]`` its time
-    (pyramid construction included)."""
+    given start pose), ``results[i-1]`` the alignment of frame ``i`` to its predecessor (None: frame ``i`` repeats
+    its predecessor's depth image and was not aligned), ``seconds[i-1]`` its time (pyramid construction included)."""
 
     poses: NDArray[np.float64]
-    results: tuple[AlignResult, ...]
+    results: tuple[AlignResult | None, ...]
     seconds: NDArray[np.float64]

@@ -25,7 +25,7 @@ from lightfast.tracking.errors import TrackingInputError
 from lightfast.tracking.rgbd_odometry.config import TrackingConfig
 from lightfast.tracking.rgbd_odometry.maps import _depth_gradient, _downsample_depth, _geometry_map, _source_points
 
-__all__ = ["RGBDFrame", "prepare_frame"]
+__all__ = ["RGBDFrame", "prepare_frame", "repeated_input"]
 
 _GREY = np.array([0.299, 0.587, 0.114], dtype=np.float32)
 
@@ -175,3 +175,20 @@ def prepare_frame(
     (0 / NaN / outside ``[min_depth_m, max_depth_m]`` invalid); both at ``camera``'s size. ``name`` appears in errors.
     """
     return _prepare(rgb, depth_m, camera, TrackingConfig() if config is None else config, name)
+
+
+def repeated_input(frame: RGBDFrame, previous: RGBDFrame) -> str:
+    """Which image of ``frame`` repeats ``previous``'s exactly: ``"depth"`` (the depth image, whether or not the
+    colour repeats too), ``"colour"`` (the colour image alone) or ``""``.
+
+    A repeated image is not a new measurement. A driver that drops a frame may send its last image again, and
+    colour and depth streams that are not synchronised pair one image of one stream with two of the other (7-Scenes'
+    Kinect v1 recordings do both: docs/daylight.md). Aligning a new colour image against an old one with the new
+    depth, or the reverse, fits a motion that one of the two images did not make. A real sensor's noise makes two
+    genuine depth images differ, so equality of the prepared level-0 images is the test."""
+    a, b = frame.levels[0], previous.levels[0]
+    if a.depth.shape == b.depth.shape and np.array_equal(a.depth, b.depth):
+        return "depth"
+    if a.grey.shape == b.grey.shape and np.array_equal(a.grey, b.grey):
+        return "colour"
+    return ""

@@ -30,7 +30,7 @@ from lightfast.geometry import se3_exp, se3_log
 from lightfast.tracking.errors import TrackingInputError
 from lightfast.tracking.rgbd_odometry.config import AlignResult, SequenceTrack, TrackingConfig
 from lightfast.tracking.rgbd_odometry.kernels import _Terms, linearize
-from lightfast.tracking.rgbd_odometry.pyramid import RGBDFrame, _Level, _prepare, prepare_frame
+from lightfast.tracking.rgbd_odometry.pyramid import RGBDFrame, _Level, _prepare, prepare_frame, repeated_input
 
 __all__ = ["align", "align_frames", "track_sequence", "warm_up"]
 
@@ -184,12 +184,14 @@ def track_sequence(
     """Frame-to-frame tracking (the f2f step of §III-D) over ``(rgb, depth_m)`` frames; each frame is aligned to
     its predecessor, starting from the previous relative motion (``constant_velocity``, as ``rgbd_tracker_node``
     does; identity after an alignment that did not converge) or from identity, and the relative motions are
-    chained from ``T_world_first``."""
+    chained from ``T_world_first``. A frame whose depth image repeats its predecessor's (:func:`repeated_input`) is
+    not aligned (its ``results`` entry is None): it keeps the predecessor's pose, and the next frame is aligned to the
+    predecessor; a frame whose colour image alone repeats is aligned by E_G alone. As ``rgbd_tracker_node`` does."""
     cfg = TrackingConfig() if config is None else config
     color, depth = _resolve_terms(cfg, use_color, use_depth)
     T_world = _check_init(T_world_first)
     poses = []
-    results: list[AlignResult] = []
+    results: list[AlignResult | None] = []
     seconds: list[float] = []
     prev: RGBDFrame | None = None
     velocity = np.eye(4)
@@ -197,11 +199,17 @@ def track_sequence(
         t0 = time.perf_counter()
         cur = _prepare(rgb, depth_m, camera, cfg, f"frame {i}")
         if prev is not None:
-            res = _align_pyramids(cur.levels, prev.levels, velocity, cfg, color, depth)
-            T_world = T_world @ res.T_target_source
-            velocity = res.T_target_source if constant_velocity and res.converged else np.eye(4)
+            repeated = repeated_input(cur, prev)
+            res = None
+            if repeated != "depth":
+                res = _align_pyramids(cur.levels, prev.levels, velocity, cfg, color and repeated != "colour", depth)
+                T_world = T_world @ res.T_target_source
+                velocity = res.T_target_source if constant_velocity and res.converged else np.eye(4)
             results.append(res)
             seconds.append(time.perf_counter() - t0)
+            if res is None:
+                poses.append(T_world.copy())
+                continue
         poses.append(T_world.copy())
         prev = cur
     if not poses:
