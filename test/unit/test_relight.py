@@ -15,6 +15,7 @@ from lightfast.daylight.sun import FREIBURG
 from lightfast.daylight.sun_update import SunEpochAssembler, sun_radiosity
 from lightfast.geometry import compose, inverse, look_at, rotation_angle_deg, se3_exp
 from lightfast.sim.validation_rooms import box_room_with_window
+from lightfast.tracking import align
 from lightfast.tracking.errors import TrackingError
 from lightfast.tracking.pipeline import RGBDTracker, TrackerConfig
 from test.unit.test_brightness import S_TRUE
@@ -232,6 +233,39 @@ def test_f2f_job_chains_to_the_pose_of_the_previous_frame_at_its_finish(room, tr
     with pytest.raises(TrackingError, match="no valid depth"):
         tracker.finish_coarse(bad)
     assert tracker.pending_stamps == []
+
+
+def test_tracker_does_not_align_a_repeated_depth_image(room, true_crf):
+    """A live frame whose depth image repeats the previous frame's (a dropped depth frame, an unsynchronised stream)
+    keeps the previous pose and stays out of f2f: the next frame is aligned to the previous one. A frame whose colour
+    image alone repeats is aligned by E_G only."""
+    lmap, sun = room
+    rgb0, d0 = live_frame(lmap, sun, true_crf, T0)
+    rgb1, d1 = live_frame(lmap, sun, true_crf, T1)
+    tracker = RGBDTracker(CAMERA)
+    tracker.reset(T0)
+    c0 = tracker.track_coarse(0, rgb0, d0)
+    c1 = tracker.track_coarse(1, rgb1, d0)  # new colour, the old depth
+    assert c1.repeated == "depth" and c1.f2f is None
+    np.testing.assert_array_equal(c1.T_map_cam, c0.T_map_cam)
+    with pytest.raises(TrackingError, match="not after"):
+        tracker.track_coarse(1, rgb1, d1)
+    job = tracker.start_coarse(2, rgb1, d1)
+    assert job.previous is not None and job.previous[0] == 0  # aligned to frame 0, not to frame 1
+    c2 = tracker.finish_coarse(job.run())
+    assert c2.repeated == "" and c2.f2f is not None and c2.f2f.converged
+    E = compose(inverse(T1), c2.T_map_cam)
+    assert np.linalg.norm(E[:3, 3]) < 0.005 and rotation_angle_deg(E[:3, :3]) < 0.3
+    T2 = compose(T1, se3_exp([0.01, 0.0, 0.02, 0.0, 0.01, 0.0]))
+    d2 = live_frame(lmap, sun, true_crf, T2)[1]
+    c3 = tracker.track_coarse(3, rgb1, d2)  # the colour alone repeats
+    assert c3.repeated == "colour" and c3.f2f is not None
+    error_m = np.linalg.norm(compose(inverse(T2), c3.T_map_cam)[:3, 3])
+    both = align(rgb1, d2, rgb1, d1, CAMERA, init_T_target_source=c2.f2f.T_target_source,
+                 config=tracker.config.f2f_config)  # E_C too: the unchanged colour holds the pose back
+    both_m = np.linalg.norm(compose(inverse(T2), c2.T_map_cam @ both.T_target_source)[:3, 3])
+    assert error_m < 0.01 < both_m  # 6.5 mm against 2.6 cm
+    assert [r.source for r in (tracker.skip_reference(s) for s in (0, 1, 2, 3))] == ["f2f"] * 4
 
 
 def test_sun_epoch_assembler_swaps_only_complete_epochs():

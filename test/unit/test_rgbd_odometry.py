@@ -123,6 +123,61 @@ def test_track_sequence_on_static_synthetic_scene():
     assert ate_rmse(track.poses, track.poses) < 1e-12
 
 
+def test_repeated_images_of_unsynchronised_kinect_streams(scenes):
+    """7-Scenes' colour and depth streams repeat images (frame 222 repeats 221's depth with a new colour image,
+    258 repeats 257's colour with a new depth image; the ground truth follows the depth). A repeated depth image is
+    not aligned: the frame keeps its predecessor's pose, and the next frame is aligned to the predecessor. A colour
+    image alone repeated is aligned by E_G only. Both terms on either pair fit a motion one image did not make."""
+    from lightfast.tracking import prepare_frame, repeated_input
+
+    def frames(ids):
+        return [scenes.frame(i) for i in ids]
+
+    def step_error_mm(track, gt, k):
+        E = compose(inverse(compose(inverse(gt[k - 1]), gt[k])), compose(inverse(track.poses[k - 1]),
+                                                                           track.poses[k]))
+        return 1000.0 * float(np.linalg.norm(E[:3, 3]))
+
+    for ids, k, kind, bound_mm in (((220, 221, 222, 223), 2, "depth", 1.0), ((256, 257, 258, 259), 2, "colour", 6.0)):
+        fr = frames(ids)
+        prepared = [prepare_frame(f.rgb, f.depth_mm / 1000.0, scenes.camera, config=FAST) for f in fr]
+        assert repeated_input(prepared[k], prepared[k - 1]) == kind
+        assert repeated_input(prepared[k - 1], prepared[k - 2]) == ""
+        track = track_sequence([(f.rgb, f.depth_mm / 1000.0) for f in fr], scenes.camera, config=FAST)
+        gt = [f.T_world_cam for f in fr]
+        assert (track.results[k - 1] is None) == (kind == "depth")
+        if kind == "depth":
+            np.testing.assert_array_equal(track.poses[k], track.poses[k - 1])
+        error_mm = step_error_mm(track, gt, k)
+        assert error_mm < bound_mm
+        a, b = fr[k - 1], fr[k]  # the same pair with both terms: millimetres more
+        both = align(b.rgb, b.depth_mm / 1000.0, a.rgb, a.depth_mm / 1000.0, scenes.camera, config=FAST)
+        T_gt = compose(inverse(a.T_world_cam), b.T_world_cam)
+        assert 1000.0 * _errors(both.T_target_source, T_gt)[0] > error_mm + 3.0
+        assert step_error_mm(track, gt, k + 1) < 10.0  # the next frame is tracked on
+
+
+def test_t_distribution_scale_fits_t_distributed_residuals():
+    """The fixed point of Kerl et al. (ICRA 2013, Eq. 10-11) recovers the scale of t-distributed residuals."""
+    from lightfast.tracking.rgbd_odometry.kernels import _t_scale
+
+    rng = np.random.default_rng(3)
+    for scale in (0.01, 0.3):
+        buf = np.zeros((20000, 14))
+        buf[:, 7] = scale * rng.standard_t(5.0, size=len(buf))
+        assert _t_scale(buf, len(buf), 7, 5.0) == pytest.approx(scale, rel=0.03)
+
+
+@pytest.mark.parametrize("frames", [(0, 5), (0, 10)])
+def test_t_distribution_norm_recovers_ground_truth_motion_on_7scenes(scenes, frames):
+    a, b = scenes.frame(frames[0]), scenes.frame(frames[1])
+    T_gt = compose(inverse(a.T_world_cam), b.T_world_cam)
+    cfg = dataclasses.replace(FAST, robust_norm="t-distribution", geometric_weight=1.0)
+    res = align(b.rgb, b.depth_mm / 1000.0, a.rgb, a.depth_mm / 1000.0, scenes.camera, config=cfg)
+    dt, dr = _errors(res.T_target_source, T_gt)
+    assert res.converged and dt < 0.01 and dr < 0.5
+
+
 def test_pose_prior_holds_directions_a_plain_wall_leaves_free():
     """A flat wall constrains depth and two rotations; a shading ramp that differs between the frames (as a relit
     reference's small reflectance error does) then drags plain Gauss-Newton along the wall. The prior at the start
