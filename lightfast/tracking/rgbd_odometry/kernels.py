@@ -16,7 +16,11 @@ camera, m), ``T = T_target_source``:
   offered for real depth sensors: the normals of Kinect v1 depth (quantised, noisy) make the point-to-plane
   residual a poor measure there. The simulated daylight recordings keep the paper's form;
 * ρ are Huber norms (``intensity_huber_delta``, ``geometric_huber_delta_m``) realised as IRLS weights, the
-  geometric one multiplied by w_G.
+  geometric one multiplied by w_G; or (``robust_norm="t-distribution"``) Student's t on each term's residuals over
+  a scale fitted to them at every step (Kerl et al., ICRA 2013), w_G then weighing the normalised terms.
+
+One pass (:func:`_residuals`) computes every associated point's residuals and Jacobians, a second one
+(:func:`_normal_equations`) weighs them: the t-distribution's scale needs all residuals before any weight.
 
 Jacobians are taken with respect to a left increment ``ξ = (ρ, φ)`` (m, rad) of ``T``. Output of :func:`linearize`:
 ``JᵀWJ`` (6×6), ``JᵀWr`` (6,), the numbers of associated and of inlier pixels and the Huber cost per associated
