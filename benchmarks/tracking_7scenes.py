@@ -69,7 +69,7 @@ from lightfast.data.errors import DatasetError
 from lightfast.data.sevenscenes import SevenScenes, colour_registration, register_colour
 from lightfast.data.shared import shared_data_dir, shown_path
 from lightfast.io import write_text_atomic
-from lightfast.tracking import TrackingConfig, ate_rmse, track_sequence
+from lightfast.tracking import TrackingConfig, ate_rmse, repeated_images, track_sequence
 
 DATA_NAME = "7scenes_redkitchen_300"
 Frames = list[tuple[NDArray[np.uint8], NDArray[np.float64]]]
@@ -141,11 +141,9 @@ def registered(seq: Sequence7) -> tuple[Sequence7, str]:
 
 def _repeated(rgb: NDArray[np.uint8], depth: NDArray[np.float64],
               target: tuple[NDArray[np.uint8], NDArray[np.float64]] | None) -> str:
-    """The rule of :func:`lightfast.tracking.repeated_input` on the input images, for the Open3D rows that get it:
-    "depth" when the depth image repeats the target frame's, "colour" when the colour image alone does, else ""."""
-    if target is None:
-        return ""
-    return "depth" if np.array_equal(depth, target[1]) else "colour" if np.array_equal(rgb, target[0]) else ""
+    """:func:`lightfast.tracking.repeated_images` against the target frame's input images (none: ""), for the Open3D
+    rows that get lightfast's rule."""
+    return "" if target is None else repeated_images(rgb, depth, *target)
 
 
 def _o3d_track(frames: Frames, cam: PinholeCamera, *, w_G: float | None, constant_velocity: bool = True,

@@ -11,6 +11,7 @@ from lightfast.tracking.rgbd_odometry import (
     align,
     align_frames,
     prepare_frame,
+    repeated_images,
     repeated_input,
     track_sequence,
 )
@@ -26,6 +27,7 @@ __all__ = [
     "align_umeyama",
     "ate_rmse",
     "prepare_frame",
+    "repeated_images",
     "repeated_input",
     "track_sequence",
 ]

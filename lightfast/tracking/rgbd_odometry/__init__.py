@@ -31,7 +31,7 @@ from lightfast.tracking.rgbd_odometry.config import (
     SequenceTrack,
     TrackingConfig,
 )
-from lightfast.tracking.rgbd_odometry.pyramid import RGBDFrame, prepare_frame, repeated_input
+from lightfast.tracking.rgbd_odometry.pyramid import RGBDFrame, prepare_frame, repeated_images, repeated_input
 from lightfast.tracking.rgbd_odometry.solver import align, align_frames, track_sequence, warm_up
 
 __all__ = [
@@ -44,6 +44,7 @@ __all__ = [
     "align",
     "align_frames",
     "prepare_frame",
+    "repeated_images",
     "repeated_input",
     "track_sequence",
     "warm_up",

@@ -25,7 +25,7 @@ from lightfast.tracking.errors import TrackingInputError
 from lightfast.tracking.rgbd_odometry.config import TrackingConfig
 from lightfast.tracking.rgbd_odometry.maps import _depth_gradient, _downsample_depth, _geometry_map, _source_points
 
-__all__ = ["RGBDFrame", "prepare_frame", "repeated_input"]
+__all__ = ["RGBDFrame", "prepare_frame", "repeated_images", "repeated_input"]
 
 _GREY = np.array([0.299, 0.587, 0.114], dtype=np.float32)
 
@@ -177,18 +177,21 @@ def prepare_frame(
     return _prepare(rgb, depth_m, camera, TrackingConfig() if config is None else config, name)
 
 
-def repeated_input(frame: RGBDFrame, previous: RGBDFrame) -> str:
-    """Which image of ``frame`` repeats ``previous``'s exactly: ``"depth"`` (the depth image, whether or not the
-    colour repeats too), ``"colour"`` (the colour image alone) or ``""``.
+def repeated_images(colour: ArrayLike, depth: ArrayLike, previous_colour: ArrayLike, previous_depth: ArrayLike) -> str:
+    """Which of two images repeats its predecessor exactly: ``"depth"`` (the depth image, whether or not the colour
+    repeats too), ``"colour"`` (the colour image alone) or ``""``.
 
     A repeated image is not a new measurement. A driver that drops a frame may send its last image again, and
     colour and depth streams that are not synchronised pair one image of one stream with two of the other (7-Scenes'
     Kinect v1 recordings do both: docs/daylight.md). Aligning a new colour image against an old one with the new
     depth, or the reverse, fits a motion that one of the two images did not make. A real sensor's noise makes two
-    genuine depth images differ, so equality of the prepared level-0 images is the test."""
-    a, b = frame.levels[0], previous.levels[0]
-    if a.depth.shape == b.depth.shape and np.array_equal(a.depth, b.depth):
+    genuine depth images differ, so exact equality is the test."""
+    if np.array_equal(depth, previous_depth):
         return "depth"
-    if a.grey.shape == b.grey.shape and np.array_equal(a.grey, b.grey):
-        return "colour"
-    return ""
+    return "colour" if np.array_equal(colour, previous_colour) else ""
+
+
+def repeated_input(frame: RGBDFrame, previous: RGBDFrame) -> str:
+    """:func:`repeated_images` of two prepared frames (their level-0 grey and depth images)."""
+    a, b = frame.levels[0], previous.levels[0]
+    return repeated_images(a.grey, a.depth, b.grey, b.depth)

@@ -198,20 +198,18 @@ def track_sequence(
     for i, (rgb, depth_m) in enumerate(frames):
         t0 = time.perf_counter()
         cur = _prepare(rgb, depth_m, camera, cfg, f"frame {i}")
+        res = None
         if prev is not None:
             repeated = repeated_input(cur, prev)
-            res = None
             if repeated != "depth":
                 res = _align_pyramids(cur.levels, prev.levels, velocity, cfg, color and repeated != "colour", depth)
                 T_world = T_world @ res.T_target_source
                 velocity = res.T_target_source if constant_velocity and res.converged else np.eye(4)
             results.append(res)
             seconds.append(time.perf_counter() - t0)
-            if res is None:
-                poses.append(T_world.copy())
-                continue
         poses.append(T_world.copy())
-        prev = cur
+        if prev is None or res is not None:  # a repeated depth image leaves the predecessor the target
+            prev = cur
     if not poses:
         raise TrackingInputError("track_sequence got no frames")
     return SequenceTrack(np.stack(poses), tuple(results), np.asarray(seconds))
