@@ -205,6 +205,7 @@ class MapLocalizer:
             min_inliers=c.min_inliers, consistent_fraction=c.ransac_consistent_fraction,
             quality=np.concatenate(dists),
             ordered_fraction=c.ransac_ordered_fraction if T_ref_cam_prior is None else 0.0,  # unguided only
+            min_iterations=c.ransac_min_iterations, refine_top=c.ransac_refine_top,
         )
         lab = np.concatenate(labels)
         counts = np.bincount(lab[est.inliers], minlength=len(sources))

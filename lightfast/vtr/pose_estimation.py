@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Final, cast
+from typing import Final
 
 import numba
 import numpy as np
@@ -122,11 +122,12 @@ def project(
     return uv, front
 
 
-def _exp_se3(delta: NDArray[np.float64]) -> NDArray[np.float64]:
+@numba.njit(cache=True, nogil=True)
+def _exp_se3(delta: NDArray[np.float64]) -> NDArray[np.float64]:  # pragma: no cover (jitted)
     """exp of a twist (ρ, φ) as a 4×4 transform (Rodrigues; the same map as :func:`lightfast.geometry.se3_exp`,
     without its input validation, for the inner loop of the refinement)."""
     rho, phi = delta[:3], delta[3:]
-    theta = math.sqrt(float(phi @ phi))
+    theta = math.sqrt(phi[0] * phi[0] + phi[1] * phi[1] + phi[2] * phi[2])
     Kx = np.array([[0.0, -phi[2], phi[1]], [phi[2], 0.0, -phi[0]], [-phi[1], phi[0], 0.0]])
     if theta < 1e-6:
         A, Bc, C = 1.0, 0.5, 1.0 / 6.0
@@ -155,32 +156,95 @@ def _stereo_residuals(
     return pred - meas, p, front
 
 
-def _normal_equations(
-    p: NDArray[np.float64], r: NDArray[np.float64], K: NDArray[np.float64], fb: float
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """JᵀJ and Jᵀr of the stereo residuals for the left perturbation T_cur_ref ← exp(δ) T_cur_ref, δ = (ρ, φ)."""
-    X, Y, Z = p[:, 0], p[:, 1], p[:, 2]
-    iz = 1.0 / Z
-    x, y = X * iz, Y * iz
-    fx, fy = K[0, 0], K[1, 1]
-    n = p.shape[0]
-    # J = ∂(u, v, d)/∂p · [I | −hat(p)] in closed form, rows (u, v, d) of every point stacked: (3n, 6)
-    J = np.zeros((n, 3, 6))
-    J[:, 0, 0] = fx * iz
-    J[:, 0, 2] = -fx * x * iz
-    J[:, 0, 3] = -fx * x * y
-    J[:, 0, 4] = fx * (1.0 + x * x)
-    J[:, 0, 5] = -fx * y
-    J[:, 1, 1] = fy * iz
-    J[:, 1, 2] = -fy * y * iz
-    J[:, 1, 3] = -fy * (1.0 + y * y)
-    J[:, 1, 4] = fy * x * y
-    J[:, 1, 5] = fy * x
-    J[:, 2, 2] = -fb * iz * iz
-    J[:, 2, 3] = -fb * y * iz
-    J[:, 2, 4] = fb * x * iz
-    Jf = J.reshape(-1, 6)
-    return Jf.T @ Jf, Jf.T @ r.reshape(-1)
+@numba.njit(cache=True, nogil=True)
+def _stereo_cost(T: NDArray[np.float64], P: NDArray[np.float64], meas: NDArray[np.float64], fx: float, fy: float,
+                 cx: float, cy: float, fb: float, H: NDArray[np.float64], g: NDArray[np.float64],
+                 normal: bool) -> float:  # pragma: no cover (jitted)
+    """Sum of squared stereo residuals (u, v, d) of ``P`` under ``T`` = T_cur_ref (inf when a point is not in front
+    of the camera); with ``normal`` also JᵀJ into ``H`` and Jᵀr into ``g`` for the left perturbation
+    T ← exp(δ) T, δ = (ρ, φ): J = ∂(u, v, d)/∂p · [I | −hat(p)]."""
+    cost = 0.0
+    if normal:
+        H[:] = 0.0
+        g[:] = 0.0
+    J = np.zeros((3, 6))
+    for i in range(P.shape[0]):
+        x0, y0, z0 = P[i, 0], P[i, 1], P[i, 2]
+        Z = T[2, 0] * x0 + T[2, 1] * y0 + T[2, 2] * z0 + T[2, 3]
+        if Z <= 1e-6:
+            return math.inf
+        X = T[0, 0] * x0 + T[0, 1] * y0 + T[0, 2] * z0 + T[0, 3]
+        Y = T[1, 0] * x0 + T[1, 1] * y0 + T[1, 2] * z0 + T[1, 3]
+        iz = 1.0 / Z
+        x, y = X * iz, Y * iz
+        r0, r1, r2 = fx * x + cx - meas[i, 0], fy * y + cy - meas[i, 1], fb * iz - meas[i, 2]
+        cost += r0 * r0 + r1 * r1 + r2 * r2
+        if not normal:
+            continue
+        J[0, 0], J[0, 2], J[0, 3], J[0, 4], J[0, 5] = fx * iz, -fx * x * iz, -fx * x * y, fx * (1.0 + x * x), -fx * y
+        J[1, 1], J[1, 2], J[1, 3], J[1, 4], J[1, 5] = fy * iz, -fy * y * iz, -fy * (1.0 + y * y), fy * x * y, fy * x
+        J[2, 2], J[2, 3], J[2, 4] = -fb * iz * iz, -fb * y * iz, fb * x * iz
+        for a in range(6):
+            g[a] += J[0, a] * r0 + J[1, a] * r1 + J[2, a] * r2
+            for b in range(a, 6):
+                H[a, b] += J[0, a] * J[0, b] + J[1, a] * J[1, b] + J[2, a] * J[2, b]
+    if normal:
+        for a in range(6):
+            for b in range(a):
+                H[a, b] = H[b, a]
+    return cost
+
+
+@numba.njit(cache=True, nogil=True)
+def _levenberg_marquardt(T: NDArray[np.float64], P: NDArray[np.float64], meas: NDArray[np.float64], fx: float,
+                         fy: float, cx: float, cy: float, fb: float,
+                         iterations: int) -> tuple[NDArray[np.float64], NDArray[np.float64], bool]:  # pragma: no cover
+    """LM on the stereo residuals from ``T`` = T_cur_ref: the refined T_cur_ref, JᵀJ there, and whether every point
+    is in front of the camera (jitted: the refinement runs for every RANSAC hypothesis it keeps)."""
+    H, g = np.zeros((6, 6)), np.zeros(6)
+    H_new, g_new = np.zeros((6, 6)), np.zeros(6)
+    cost = _stereo_cost(T, P, meas, fx, fy, cx, cy, fb, H, g, True)
+    lam = 1e-3
+    for _ in range(iterations):
+        if not math.isfinite(cost):
+            break
+        A = H + lam * np.diag(np.diag(H) + 1e-12)
+        L = np.zeros((6, 6))  # Cholesky of the damped (symmetric positive definite) matrix
+        ok = True
+        for i in range(6):
+            for j in range(i + 1):
+                v = A[i, j] - np.dot(L[i, :j], L[j, :j])
+                if i == j:
+                    if v <= 0.0:
+                        ok = False
+                        break
+                    L[i, i] = math.sqrt(v)
+                else:
+                    L[i, j] = v / L[j, j]
+            if not ok:
+                break
+        if not ok:
+            break
+        w = np.zeros(6)
+        for i in range(6):
+            w[i] = (-g[i] - np.dot(L[i, :i], w[:i])) / L[i, i]
+        delta = np.zeros(6)
+        for i in range(5, -1, -1):
+            delta[i] = (w[i] - np.dot(L[i + 1:, i], delta[i + 1:])) / L[i, i]
+        T_new = _exp_se3(delta) @ T
+        cost_new = _stereo_cost(T_new, P, meas, fx, fy, cx, cy, fb, H_new, g_new, True)
+        if cost_new < cost:
+            converged = cost - cost_new <= 1e-9 * cost or math.sqrt(np.dot(delta, delta)) < 1e-10
+            T, cost = T_new, cost_new
+            H[:], g[:] = H_new, g_new
+            lam = max(lam / 10.0, 1e-9)
+            if converged:
+                break
+        else:
+            lam *= 10.0
+            if lam > 1e6:
+                break
+    return T, H, math.isfinite(cost)
 
 
 def refine_pose_stereo(
@@ -191,37 +255,17 @@ def refine_pose_stereo(
     (``uvd_cur``: left pixel and effective disparity, (N, 3)). Returns the refined ``T_ref_cur`` and the 6×6
     covariance of ξ in ``T_ref_cur · exp(ξ)`` (nominal 1 px noise; infinite if singular)."""
     K, fb = camera.K, camera.fb
-    T = _invert(T_ref_cur)  # T_cur_ref
-    r, p, front = _stereo_residuals(T, points_ref, uvd_cur, K, fb)
-    cost = float(np.sum(r[front] ** 2)) if front.all() else math.inf
-    lam = 1e-3
-    for _ in range(iterations):
-        if not front.all():
-            break
-        H, g = _normal_equations(p, r, K, fb)
-        try:
-            delta = -np.linalg.solve(H + lam * np.diag(np.diag(H) + 1e-12), g)
-        except np.linalg.LinAlgError:
-            break
-        T_new = _exp_se3(cast(NDArray[np.float64], delta)) @ T  # float64 normal equations
-        r_new, p_new, front_new = _stereo_residuals(T_new, points_ref, uvd_cur, K, fb)
-        cost_new = float(np.sum(r_new**2)) if front_new.all() else math.inf
-        if cost_new < cost:
-            converged = cost - cost_new <= 1e-9 * cost or float(np.linalg.norm(delta)) < 1e-10
-            T, r, p, front, cost = T_new, r_new, p_new, front_new, cost_new
-            lam = max(lam / 10.0, 1e-9)
-            if converged:
-                break
-        else:
-            lam *= 10.0
-            if lam > 1e6:
-                break
-    cov = np.full((6, 6), np.inf)
-    if front.all() and points_ref.shape[0] >= 3:
-        H, _ = _normal_equations(p, r, K, fb)
-        if np.linalg.cond(H) < 1e14:
-            cov = NOMINAL_SIGMA_PX**2 * np.linalg.inv(H)
-    return _invert(T), cov
+    P = np.ascontiguousarray(points_ref, np.float64)
+    T, H, front = _levenberg_marquardt(_invert(T_ref_cur), P, np.ascontiguousarray(uvd_cur, np.float64), K[0, 0],
+                                       K[1, 1], K[0, 2], K[1, 2], fb, iterations)
+    return _invert(T), _covariance(H) if front and P.shape[0] >= 3 else np.full((6, 6), np.inf)
+
+
+def _covariance(H: NDArray[np.float64]) -> NDArray[np.float64]:
+    """σ²(JᵀJ)⁻¹ at the nominal σ (infinite if JᵀJ is singular)."""
+    if np.linalg.cond(H) < 1e14:
+        return np.asarray(NOMINAL_SIGMA_PX**2 * np.linalg.inv(H), np.float64)
+    return np.full((6, 6), np.inf)
 
 
 class _ConsistentTriples:
@@ -309,8 +353,10 @@ def _count_inliers(Ts: NDArray[np.float64], P: NDArray[np.float64], meas: NDArra
 
 
 def warm_up() -> None:
-    """Compile (or load from numba's cache) the jitted RANSAC scoring now rather than on the first frame."""
+    """Compile (or load from numba's cache) the jitted RANSAC scoring and refinement now rather than on the first
+    frame."""
     _count_inliers(np.eye(4)[None], np.ones((1, 3)), np.ones((1, 3)), 1.0, 1.0, 0.0, 0.0, 1.0, 1.0)
+    _levenberg_marquardt(np.eye(4), np.ones((3, 3)), np.ones((3, 3)), 1.0, 1.0, 0.0, 0.0, 1.0, 1)
 
 
 def _kabsch_batch(P: NDArray[np.float64], Q: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -344,24 +390,27 @@ def estimate_pose_stereo(
     consistency_px: float = 0.35,
     quality: ArrayLike | None = None,
     ordered_fraction: float = 0.0,
+    refine_top: int = 1,
+    min_iterations: int = 0,
 ) -> PoseEstimate:
     """Pose of the current camera in the reference frame from 3-D reference points and their current stereo
     measurements (left pixel, effective disparity = fb / Z): 3-point 3-D–3-D RANSAC scored by the stereo
     reprojection error, then Levenberg–Marquardt on the inliers (both steps of the module docstring).
 
-    With ``consistent_fraction`` > 0 that share of the hypotheses is drawn from *distance-consistent* triples
-    (:class:`_ConsistentTriples`: a rigid motion keeps the distances between points, so the three reference points
-    and the three current stereo points must have pairwise distances that agree within the stereo depth
-    uncertainty of a ``consistency_px`` disparity error), the rest uniformly as before. At low inlier ratios —
-    the whole-map search under changed lighting, a dozen correct matches among ~200 — a uniform triple is all
-    inliers with probability w³ (1000 hypotheses find 12 of 164 a third of the time); about a quarter of all pairs
-    but nearly every inlier pair pass the test, which makes an all-inlier triple tens of times likelier. Scoring
-    and the adaptive stop (on w³, conservative) are unchanged.
-
-    With ``quality`` (per correspondence, lower is better: the descriptor distance) and ``ordered_fraction`` > 0,
-    that share of the hypotheses follows PROSAC's progressive sampling (:class:`_ProsacTriples`): the first ones
-    come from the most distinctive matches, where the correct ones concentrate when most matches are wrong (in the
-    whole-map search of a repeat at 20:06, 6 of the 20 closest of 164 matches were among its 12 correct ones).
+    * ``consistent_fraction`` > 0: that share of the hypotheses comes from *distance-consistent* triples
+      (:class:`_ConsistentTriples`: pairwise distances of the reference and current points agree within the depth
+      uncertainty of a ``consistency_px`` disparity error). At a dozen correct matches among ~200 (the whole-map
+      search under changed lighting) a uniform triple is rarely all inliers; nearly every inlier pair passes.
+    * ``quality`` (per correspondence, lower is better) and ``ordered_fraction`` > 0: that share follows PROSAC's
+      progressive sampling (:class:`_ProsacTriples`), the best-ranked matches first — by descriptor distance where
+      most matches are wrong (a repeat at 20:06: 6 of the 20 closest of 164 were among its 12 correct ones), by
+      nearness for VO (near points fix the translation).
+    * ``min_iterations``: hypotheses drawn before the adaptive stop (on w³) may end the loop. With most points far
+      an all-inlier triple of far points fits nearly any translation, so the stop's assumption (any all-inlier
+      sample gives the best model) fails.
+    * ``refine_top`` > 1: the best ``refine_top`` hypotheses with distinct inlier sets are each refined (inliers
+      re-selected, LM, until stable); the one with the most inliers afterwards (then the lowest RMS) wins. The
+      most-inliers hypothesis often rests on far points and misses the near ones a slightly worse one holds.
 
     ``success`` needs at least ``max(min_inliers, 3)`` inliers. A failed estimate has ``T_ref_cur`` = identity
     and an empty inlier mask. Deterministic for a given ``seed``. Never raises for degenerate data (too few
@@ -396,10 +445,11 @@ def estimate_pose_stereo(
         ordered = _ProsacTriples(q[idx])
     thr2 = threshold_px * threshold_px
     best_count, best_T = 0, None
+    top_counts, top_Ts = np.zeros(0, np.int64), np.zeros((0, 4, 4))  # the refine_top best hypotheses so far
     needed = float(iterations)
     done = 0
     log_fail = math.log(1.0 - confidence)
-    while done < min(needed, iterations):
+    while done < min(max(needed, min_iterations), iterations):
         h = min(_BATCH, iterations - done)
         done += h
         n_ord = round(h * ordered_fraction) if ordered is not None else 0
@@ -422,6 +472,10 @@ def estimate_pose_stereo(
             continue
         Ts = _kabsch_batch(Ps, Qs)  # T_cur_ref hypotheses
         counts = _count_inliers(Ts, Pv, Mv, K[0, 0], K[1, 1], K[0, 2], K[1, 2], fb, thr2)
+        if refine_top > 1:
+            top_counts, top_Ts = np.concatenate([top_counts, counts]), np.concatenate([top_Ts, Ts])
+            keep = np.argsort(-top_counts, kind="stable")[:refine_top]
+            top_counts, top_Ts = top_counts[keep], top_Ts[keep]
         k = int(np.argmax(counts))
         if counts[k] > best_count:
             best_count, best_T = int(counts[k]), Ts[k]
@@ -430,21 +484,49 @@ def estimate_pose_stereo(
             needed = 0.0 if p_good >= 1.0 else (log_fail / math.log(1.0 - p_good) if p_good > 0 else math.inf)
     if best_T is None or best_count < need:
         return failed
-    T_ref_cur = _invert(best_T)
-    inliers = np.zeros(n, bool)
-    cov = np.full((6, 6), np.inf)
-    for _ in range(3):  # select inliers, refine on them; until the inlier set is stable
+    best: tuple[int, float, NDArray[np.float64], NDArray[np.bool_], NDArray[np.float64]] | None = None
+    seen: list[NDArray[np.bool_]] = []
+    for T_cur_ref in [best_T] if refine_top <= 1 else list(top_Ts[top_counts >= need]):
+        r, _, front = _stereo_residuals(T_cur_ref, P, meas, K, fb)
+        first = ok & front & (np.sum(r * r, axis=1) <= thr2)
+        if any(np.array_equal(first, m) for m in seen):
+            continue  # the same consensus as a hypothesis already refined
+        seen.append(first)
+        refined = _refine_consensus(_invert(T_cur_ref), P, meas, ok, camera, thr2)
+        if refined is not None and (best is None or (refined[0], -refined[1]) > (best[0], -best[1])):
+            best = refined
+    if best is None:
+        return failed
+    count, rms, T_ref_cur, inliers, H = best
+    cov = _covariance(H) if np.all(np.isfinite(H)) else np.full((6, 6), np.inf)
+    return PoseEstimate(T_ref_cur, inliers, count >= need, rms, cov)
+
+
+def _refine_consensus(
+    T_ref_cur: NDArray[np.float64], P: NDArray[np.float64], meas: NDArray[np.float64], ok: NDArray[np.bool_],
+    camera: StereoCamera, thr2: float,
+) -> tuple[int, float, NDArray[np.float64], NDArray[np.bool_], NDArray[np.float64]] | None:
+    """Select the inliers of a hypothesis, refine on them, until the inlier set is stable (at most three times):
+    (inlier count, RMS px, ``T_ref_cur``, inlier mask, JᵀJ (NaN if a point fell behind the camera)), or None when
+    fewer than three remain."""
+    K, fb = camera.K, camera.fb
+    inliers = np.zeros(P.shape[0], bool)
+    H = np.full((6, 6), np.nan)
+    for _ in range(3):
         r, _, front = _stereo_residuals(_invert(T_ref_cur), P, meas, K, fb)
         new = ok & front & (np.sum(r * r, axis=1) <= thr2)
         if np.count_nonzero(new) < 3:
-            return failed
+            return None
         if np.array_equal(new, inliers):
             break
         inliers = new
-        T_ref_cur, cov = refine_pose_stereo(P[inliers], meas[inliers], camera, T_ref_cur)
-    r, _, _ = _stereo_residuals(_invert(T_ref_cur), P[inliers], meas[inliers], K, fb)
-    rms = float(np.sqrt(np.mean(np.sum(r * r, axis=1))))
-    count = int(np.count_nonzero(inliers))
+        T, H, in_front = _levenberg_marquardt(_invert(T_ref_cur), np.ascontiguousarray(P[inliers]),
+                                              np.ascontiguousarray(meas[inliers]), K[0, 0], K[1, 1], K[0, 2],
+                                              K[1, 2], fb, 10)
+        T_ref_cur = _invert(T)
+        if not in_front:
+            H = np.full((6, 6), np.nan)
     if not np.all(np.isfinite(T_ref_cur)):
-        return failed
-    return PoseEstimate(T_ref_cur, inliers, count >= need, rms, cov)
+        return None
+    r, _, _ = _stereo_residuals(_invert(T_ref_cur), P[inliers], meas[inliers], K, fb)
+    return int(np.count_nonzero(inliers)), float(np.sqrt(np.mean(np.sum(r * r, axis=1)))), T_ref_cur, inliers, H

@@ -54,6 +54,18 @@ class VisualOdometryConfig(Config):
     )
     ransac_iterations: int = param(500, description="Most RANSAC hypotheses.", min=10, max=100000)
     ransac_confidence: float = param(0.999, description="RANSAC confidence (adaptive stop).", min=0.5, max=0.999999)
+    ransac_min_iterations: int = param(
+        500, description="Fewest RANSAC hypotheses before the adaptive stop (an all-inlier triple of far points is "
+        "no good hypothesis, so the stop's assumption fails).", min=0, max=100000
+    )
+    ransac_near_first_fraction: float = param(
+        0.5, description="Share of the RANSAC hypotheses sampled progressively from the nearest landmarks (largest "
+        "disparity first: they fix the translation).", min=0.0, max=1.0
+    )
+    ransac_refine_top: int = param(
+        16, description="The best RANSAC hypotheses refined (inliers re-selected and refined); the one with the "
+        "most inliers after refinement wins.", min=1, max=1000
+    )
     min_inliers: int = param(10, description="Fewest inliers for a VO estimate to count as a success.", min=4)
     max_translation_m: float = param(
         5.0, description="A frame-to-frame motion longer than this is rejected as a failure, m.", min=0.0
@@ -123,6 +135,8 @@ class VisualOdometry:
             est = estimate_pose_stereo(
                 prev.points[i_ref], cur.uv_left[i_cur], disparity[i_cur], camera, threshold_px=c.ransac_threshold_px,
                 iterations=c.ransac_iterations, confidence=c.ransac_confidence, min_inliers=c.min_inliers,
+                min_iterations=c.ransac_min_iterations, quality=-disparity[i_cur],
+                ordered_fraction=c.ransac_near_first_fraction, refine_top=c.ransac_refine_top,
             )
             step_m = float(np.linalg.norm(est.T_ref_cur[:3, 3]))
             success = est.success and step_m <= c.max_translation_m

@@ -326,6 +326,34 @@ def test_stereo_pose_solver_recovers_motion_among_outliers():
     assert not estimate_pose_stereo(P_ref[:4], uv[:4], d[:4], camera, min_inliers=6).success
 
 
+def test_near_first_sampling_and_refined_hypotheses_fix_the_translation_far_points_leave_open():
+    """A forward step of 0.8 m seen by 12 landmarks 3-6 m away and 80 at 30-60 m (the teach VO of the simulated
+    routes: most inliers far, reference depths from one stereo pair). Far points fit nearly any translation, so
+    the most-inliers hypothesis of an early-stopped RANSAC often rests on them alone and misses the near points;
+    sampling near points first, running every hypothesis and refining the 16 best (the VO's options) finds the
+    consensus that holds the near points too."""
+    camera = StereoCamera.from_projections(P_LEFT, P_RIGHT)
+    T_ref_cur = pose(0.05, 0.8, 2.0)
+    errors: dict[str, list[float]] = {"plain": [], "vo": []}
+    for seed in range(20):
+        rng = np.random.default_rng(seed)
+        P = np.r_[np.c_[rng.uniform(-2, 2, 12), rng.uniform(0.5, 1.2, 12), rng.uniform(3, 6, 12)],
+                  np.c_[rng.uniform(-30, 30, 80), rng.uniform(-8, 1, 80), rng.uniform(30, 60, 80)]]
+        uv_ref = P[:, :2] / P[:, 2:] * F + K[:2, 2]
+        z_ref = F * B / (F * B / P[:, 2] + rng.normal(0, 0.3, len(P)))  # 0.3 px disparity noise
+        P_ref = np.c_[(uv_ref - K[:2, 2]) / F * z_ref[:, None], z_ref]
+        uv, d = _stereo_measurements(P, T_ref_cur, rng, 0.7)
+        options = {"plain": {}, "vo": {"min_iterations": 500, "quality": -d, "ordered_fraction": 0.5,
+                                       "refine_top": 16}}
+        for name, opts in options.items():
+            est = estimate_pose_stereo(P_ref, uv, d, camera, min_inliers=10, **opts)
+            assert est.success
+            errors[name].append(float(np.linalg.norm(est.T_ref_cur[:3, 3] - T_ref_cur[:3, 3])))
+    plain, vo = np.array(errors["plain"]), np.array(errors["vo"])
+    assert np.sum(plain > 0.1) >= 4 and np.sum(vo > 0.05) == 0, (plain.round(3), vo.round(3))
+    assert np.median(vo) < 0.5 * np.median(plain)
+
+
 def _few_correct_matches(rng: np.random.Generator, T_ref_cur: np.ndarray, n: int, n_in: int):
     """``n`` reference points and stereo measurements of which only the first ``n_in`` belong together; the others
     are keypoints (with their disparities) of other landmarks, as wrong matches."""
