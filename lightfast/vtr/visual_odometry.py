@@ -7,7 +7,9 @@ constant-velocity prediction (the last successful motion) primes guided matching
 (:func:`~lightfast.vtr.landmark_matching.match_landmarks` within ``match_radius_px``); unguided matching is the
 fallback when the guided attempt finds fewer than ``min_inliers`` inliers. The motion comes from
 :func:`~lightfast.vtr.pose_estimation.estimate_pose_stereo` (3-point RANSAC and Levenberg–Marquardt on the stereo
-reprojection error); a motion longer than ``max_translation_m`` is rejected.
+reprojection error); a motion longer than ``max_translation_m`` is rejected. Most landmarks of an outdoor frame are
+far and fit nearly any translation, so the RANSAC draws all ``ransac_min_iterations`` hypotheses, half of them
+from the nearest landmarks first, and refines the ``ransac_refine_top`` best (``docs/vtr.md``, "The VO's RANSAC").
 
 Output per frame: :class:`VoResult` — ``T_prev_cur`` (4×4, current left camera frame → previous one; metres, REP-103
 optical axes), matches, inliers, the inliers' RMS reprojection error (px), the motion's nominal covariance (1 px
