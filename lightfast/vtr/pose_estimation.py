@@ -230,7 +230,7 @@ def _levenberg_marquardt(T: NDArray[np.float64], P: NDArray[np.float64], meas: N
             w[i] = (-g[i] - np.dot(L[i, :i], w[:i])) / L[i, i]
         delta = np.zeros(6)
         for i in range(5, -1, -1):
-            delta[i] = (w[i] - np.dot(L[i + 1:, i], delta[i + 1:])) / L[i, i]
+            delta[i] = (w[i] - np.dot(np.ascontiguousarray(L[i + 1:, i]), delta[i + 1:])) / L[i, i]
         T_new = _exp_se3(delta) @ T
         cost_new = _stereo_cost(T_new, P, meas, fx, fy, cx, cy, fb, H_new, g_new, True)
         if cost_new < cost:
