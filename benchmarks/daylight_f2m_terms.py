@@ -75,11 +75,9 @@ def study(seq_dir: Path, lmap: LightingMap, *, step: int, shift_m: float, turn_d
     sun_B = sequence_sun_radiosity(seq_dir, lmap)
     rng = np.random.default_rng(seed)
     rows: list[dict[str, Any]] = []
-    for i, (stamp, rgb, depth_m, camera, T_gt) in enumerate(recording_frames(files["bag"])):
-        if max_frames is not None and i >= max_frames:
-            break
-        if i % step:
-            continue
+    for k, (stamp, rgb, depth_m, camera, T_gt) in enumerate(recording_frames(files["bag"], step=step,
+                                                                             limit=max_frames)):
+        i = k * step  # the frame's index in the recording
         T_start = T_gt @ _perturbation(rng, shift_m, turn_deg)
         live = prepare_frame(rgb, depth_m, camera, config=cfg, name=f"live {stamp}")
         start_t, start_r = _errors(T_start, T_gt)

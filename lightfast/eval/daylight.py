@@ -153,31 +153,37 @@ def pooled(runs: Sequence[SequenceRun]) -> dict[str, float]:
             "rmse_cm": 100.0 * float(np.sqrt(np.mean(err**2))) if len(err) else float("nan")}
 
 
-def recording_frames(bag_dir: Path) -> Iterator[tuple[int, NDArray[np.uint8], NDArray[np.float32], PinholeCamera,
-                                                     NDArray[np.float64]]]:
+def recording_frames(bag_dir: Path, *, step: int = 1, limit: int | None = None
+                     ) -> Iterator[tuple[int, NDArray[np.uint8], NDArray[np.float32], PinholeCamera,
+                                         NDArray[np.float64]]]:
     """(stamp_ns, rgb, depth_m, camera, T_map_cam of the ground truth) per frame of a simulated recording, paired by
-    exact stamp."""
+    exact stamp: every ``step``-th complete frame of the first ``limit`` (all by default). The images of the frames
+    skipped are not converted, and the bag is not read past the last frame wanted."""
     from lightfast.ros.convert import camera_from_camera_info, image_to_numpy, pose_stamped_to_matrix
 
-    parts: dict[int, dict[str, object]] = {}
+    if step < 1:
+        raise DaylightEvalError(f"step must be at least 1, got {step}")
+    parts: dict[int, dict[str, Any]] = {}
     need = (COLOR_TOPIC, DEPTH_TOPIC, COLOR_INFO_TOPIC, GT_POSE_TOPIC)
+    complete = 0
     with open_bag(bag_dir) as bag:
         for m in bag.messages(topics=need):
+            if limit is not None and complete >= limit:
+                return
             msg = bag.deserialize(m)
             stamp = int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
             p = parts.setdefault(stamp, {})
-            if m.topic == COLOR_TOPIC:
-                p["rgb"] = image_to_numpy(msg)
-            elif m.topic == DEPTH_TOPIC:
-                d = image_to_numpy(msg)
-                p["depth"] = d.astype(np.float32) / 1000.0 if d.dtype == np.uint16 else d.astype(np.float32)
-            elif m.topic == COLOR_INFO_TOPIC:
-                p["camera"] = camera_from_camera_info(msg)
-            else:
-                p["gt"] = pose_stamped_to_matrix(msg)[0]
-            if len(p) == 4:
-                del parts[stamp]
-                yield stamp, p["rgb"], p["depth"], p["camera"], p["gt"]  # type: ignore[misc]
+            p[m.topic] = msg
+            if len(p) < 4:
+                continue
+            del parts[stamp]
+            complete += 1
+            if (complete - 1) % step:
+                continue
+            d = image_to_numpy(p[DEPTH_TOPIC])
+            yield (stamp, image_to_numpy(p[COLOR_TOPIC]),
+                   d.astype(np.float32) / 1000.0 if d.dtype == np.uint16 else d.astype(np.float32),
+                   camera_from_camera_info(p[COLOR_INFO_TOPIC]), pose_stamped_to_matrix(p[GT_POSE_TOPIC])[0])
 
 
 def sequence_files(seq_dir: Path) -> dict[str, Path]:
@@ -222,13 +228,9 @@ def run_sequence(seq_dir: Path, lmap: LightingMap, method: str, *, max_frames: i
     run = SequenceRun(seq_dir.name, method)
     tracker: RGBDTracker | None = None
     n = frames_total if max_frames is None else min(frames_total, max_frames)
-    it = recording_frames(files["bag"])
-    for i, (stamp, rgb, depth_m, camera, T_gt) in track(enumerate(it), desc=f"{seq_dir.name} {method}", total=n,
-                                                        enabled=progress, unit="frame"):
-        if i >= n:
-            break
-        if i % inputs.frame_step:
-            continue
+    it = recording_frames(files["bag"], step=inputs.frame_step, limit=n)
+    for stamp, rgb, depth_m, camera, T_gt in track(it, desc=f"{seq_dir.name} {method}",
+                                                   total=-(-n // inputs.frame_step), enabled=progress, unit="frame"):
         depth_m = inputs.depth(depth_m)
         if tracker is None:
             tracker = RGBDTracker(camera, config=tracker_cfg)

@@ -353,10 +353,8 @@ def analyze_recording(seq_dir: Path, *, max_frames: int | None = None, progress:
         noise = (e_per_x, float(cam_doc["read_noise_e"]) / e_per_x)
     out: list[FrameRegime] = []
     poses = []
-    for i, (stamp, rgb, depth, camera, T_gt) in track(enumerate(recording_frames(files["bag"])), desc=seq_dir.name,
-                                                      total=n, enabled=progress, unit="frame"):
-        if i >= n:
-            break
+    for i, (stamp, rgb, depth, camera, T_gt) in track(enumerate(recording_frames(files["bag"], limit=n)),
+                                                      desc=seq_dir.name, total=n, enabled=progress, unit="frame"):
         if stamp not in suns:
             raise DaylightEvalError(f"{seq_dir}: frame {i} (stamp {stamp}) has no row in truth.csv")
         out.append(analyze_frame(rgb, depth, camera, T_gt, scene, suns[stamp], crf=crf, noise=noise,

@@ -98,6 +98,25 @@ def test_evaluation_writes_table_csv_json_and_plots(sim_dir: Path, tmp_path: Pat
     assert ran == ["depth-only"]
 
 
+def test_recording_frames_converts_only_the_frames_kept(sim_dir: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Every step-th complete frame of the first ``limit``; the images of the frames skipped are not converted."""
+    import lightfast.ros.convert as convert
+    from lightfast.eval.daylight import recording_frames
+
+    bag = sim_dir / "DS1.T6" / "bag"
+    every = [f[0] for f in recording_frames(bag, limit=5)]
+    assert len(every) == 5 and every == sorted(every)
+    calls: list[int] = []
+    original = convert.image_to_numpy
+    monkeypatch.setattr(convert, "image_to_numpy", lambda msg: calls.append(1) or original(msg))
+    kept = list(recording_frames(bag, step=2, limit=5))
+    assert [f[0] for f in kept] == every[::2]
+    assert len(calls) == 2 * len(kept) == 6  # colour and depth of frames 0, 2 and 4 only
+    assert kept[0][2].dtype == np.float32 and kept[0][1].ndim == 3 and kept[0][4].shape == (4, 4)
+    with pytest.raises(DaylightEvalError, match="step"):
+        next(recording_frames(bag, step=0))
+
+
 def test_bad_inputs_are_clear_errors(sim_dir: Path, tmp_path: Path) -> None:
     with pytest.raises(EvalError, match="unknown method"):
         evaluate_daylight(sim_dir, tmp_path, methods=["magic"])
