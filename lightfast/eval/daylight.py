@@ -153,12 +153,10 @@ def pooled(runs: Sequence[SequenceRun]) -> dict[str, float]:
             "rmse_cm": 100.0 * float(np.sqrt(np.mean(err**2))) if len(err) else float("nan")}
 
 
-def recording_frames(bag_dir: Path, *, step: int = 1, limit: int | None = None
-                     ) -> Iterator[tuple[int, NDArray[np.uint8], NDArray[np.float32], PinholeCamera,
-                                         NDArray[np.float64]]]:
-    """(stamp_ns, rgb, depth_m, camera, T_map_cam of the ground truth) per frame of a simulated recording, paired by
-    exact stamp: every ``step``-th complete frame of the first ``limit`` (all by default). The images of the frames
-    skipped are not converted, and the bag is not read past the last frame wanted."""
+def recording_frames(bag_dir: Path, *, step: int = 1, limit: int | None = None) -> Iterator[
+        tuple[int, NDArray[np.uint8], NDArray[np.float32], PinholeCamera, NDArray[np.float64]]]:
+    """(stamp_ns, rgb, depth_m, camera, T_map_cam of the truth) of every ``step``-th complete frame (paired by exact
+    stamp) of the first ``limit`` of a simulated recording; skipped frames are not converted, nor the bag read on."""
     from lightfast.ros.convert import camera_from_camera_info, image_to_numpy, pose_stamped_to_matrix
 
     if step < 1:
