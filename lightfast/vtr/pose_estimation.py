@@ -492,7 +492,7 @@ def estimate_pose_stereo(
         if any(np.array_equal(first, m) for m in seen):
             continue  # the same consensus as a hypothesis already refined
         seen.append(first)
-        refined = _refine_consensus(_invert(T_cur_ref), P, meas, ok, camera, thr2)
+        refined = _refine_consensus(first, P, meas, camera, thr2, ok, _invert(T_cur_ref))
         if refined is not None and (best is None or (refined[0], -refined[1]) > (best[0], -best[1])):
             best = refined
     if best is None:
@@ -503,29 +503,31 @@ def estimate_pose_stereo(
 
 
 def _refine_consensus(
-    T_ref_cur: NDArray[np.float64], P: NDArray[np.float64], meas: NDArray[np.float64], ok: NDArray[np.bool_],
-    camera: StereoCamera, thr2: float,
+    inliers: NDArray[np.bool_], P: NDArray[np.float64], meas: NDArray[np.float64], camera: StereoCamera,
+    thr2: float, ok: NDArray[np.bool_], T_ref_cur: NDArray[np.float64],
 ) -> tuple[int, float, NDArray[np.float64], NDArray[np.bool_], NDArray[np.float64]] | None:
-    """Select the inliers of a hypothesis, refine on them, until the inlier set is stable (at most three times):
-    (inlier count, RMS px, ``T_ref_cur``, inlier mask, JᵀJ (NaN if a point fell behind the camera)), or None when
-    fewer than three remain."""
+    """Refine on a hypothesis' inliers (selected at ``T_ref_cur``), re-select them, until the inlier set is stable
+    (at most three refinements): (inlier count, RMS px, ``T_ref_cur``, inlier mask, JᵀJ (NaN if a point fell
+    behind the camera)), or None when fewer than three remain."""
     K, fb = camera.K, camera.fb
-    inliers = np.zeros(P.shape[0], bool)
-    H = np.full((6, 6), np.nan)
-    for _ in range(3):
-        r, _, front = _stereo_residuals(_invert(T_ref_cur), P, meas, K, fb)
-        new = ok & front & (np.sum(r * r, axis=1) <= thr2)
-        if np.count_nonzero(new) < 3:
-            return None
-        if np.array_equal(new, inliers):
-            break
-        inliers = new
+    if np.count_nonzero(inliers) < 3:
+        return None
+    for k in range(3):
         T, H, in_front = _levenberg_marquardt(_invert(T_ref_cur), np.ascontiguousarray(P[inliers]),
                                               np.ascontiguousarray(meas[inliers]), K[0, 0], K[1, 1], K[0, 2],
                                               K[1, 2], fb, 10)
         T_ref_cur = _invert(T)
         if not in_front:
             H = np.full((6, 6), np.nan)
+        if k == 2:
+            break
+        r, _, front = _stereo_residuals(T, P, meas, K, fb)
+        new = ok & front & (np.sum(r * r, axis=1) <= thr2)
+        if np.count_nonzero(new) < 3:
+            return None
+        if np.array_equal(new, inliers):
+            break
+        inliers = new
     if not np.all(np.isfinite(T_ref_cur)):
         return None
     r, _, _ = _stereo_residuals(_invert(T_ref_cur), P[inliers], meas[inliers], K, fb)
