@@ -147,7 +147,7 @@ class VtrLocalizer:
         self.stats |= {"frames_done": 0, "ignored": 0, "time_jumps": 0}
         if config.mode == "teach":
             _check_teach_target(self.map_path, config.overwrite_map)
-            self.teach = TeachPipeline(self.map_path, config.teach, stereo=config.stereo,
+            self.teach = TeachPipeline(self.map_path, config.teach, stereo=config.stereo, vo=config.vo,
                                        overwrite=config.overwrite_map)
 
     def status_values(self) -> dict[str, Any]:
@@ -171,7 +171,7 @@ class VtrLocalizer:
             return False
         self._map_attempt_s = now
         try:
-            self.repeat = RepeatPipeline(MapStore.load(self.map_path), self.config.repeat)
+            self.repeat = RepeatPipeline(MapStore.load(self.map_path), self.config.repeat, vo=self.config.vo)
         except (MapError, VtrError, ConfigError, OSError) as exc:
             self.map_error = f"no usable teach map: {exc}"
             self._problem(f"map:{type(exc).__name__}", f"{self.map_error} (retrying every "
@@ -289,7 +289,7 @@ class VtrLocalizer:
         self._T_odom_cam = np.eye(4)
         self._last_stamp_ns = None
         if self.repeat is not None:
-            self.repeat = RepeatPipeline(self.repeat.map, self.config.repeat)
+            self.repeat = RepeatPipeline(self.repeat.map, self.config.repeat, vo=self.config.vo)
         self._emit(Log(f"{why} (a bag played again, or looped?): the repeat starts over with a search of the whole "
                        "map, the VO chain at its origin", Level.WARN))
 

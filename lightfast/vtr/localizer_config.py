@@ -3,7 +3,8 @@
 generated. It holds the phase (``mode``: teach or repeat), the map directory, the node's frames and queue, and the
 core configurations as sections (dotted parameters, e.g. ``repeat.mode``, ``stereo.max_features``):
 :class:`~lightfast.vtr.teach.TeachConfig` (``teach``), :class:`~lightfast.vtr.stereo_config.StereoConfig` (``stereo``;
-teach only: a repeat uses the front-end options stored in the map, so that the features match) and
+teach only: a repeat uses the front-end options stored in the map, so that the features match),
+:class:`~lightfast.vtr.visual_odometry.VisualOdometryConfig` (``vo``; teach and repeat) and
 :class:`~lightfast.vtr.repeat_config.RepeatConfig` (``repeat``), each defaulting to the core's own defaults.
 
 The sections are read-only while the node runs (changing them would restart a teach or a repeat); the node-level
@@ -18,12 +19,13 @@ from lightfast.node_options import SensorInputOptions, StampOptions
 from lightfast.vtr.repeat_config import RepeatConfig
 from lightfast.vtr.stereo_config import StereoConfig
 from lightfast.vtr.teach import TeachConfig
+from lightfast.vtr.visual_odometry import VisualOdometryConfig
 
 __all__ = ["PHASES", "VtrLocalizerConfig"]
 
 #: What the node does with the stereo stream: build a map, or localize against one.
 PHASES = ("teach", "repeat")
-_TEACH, _STEREO, _REPEAT = TeachConfig(), StereoConfig(), RepeatConfig()
+_TEACH, _STEREO, _VO, _REPEAT = TeachConfig(), StereoConfig(), VisualOdometryConfig(), RepeatConfig()
 
 
 @dataclass(frozen=True)
@@ -50,6 +52,8 @@ class VtrLocalizerConfig(SensorInputOptions, StampOptions):
                                "stored per keyframe and the front end's threads.")
     stereo: StereoConfig = param(_STEREO, read_only=True, description="Teach: the stereo front end (features, "
                                  "left-right matching); a repeat uses the map's.")
+    vo: VisualOdometryConfig = param(_VO, read_only=True, description="Teach and repeat: the frame-to-frame "
+                                     "greyscale stereo VO (matching, RANSAC, rejected motions).")
     repeat: RepeatConfig = param(_REPEAT, read_only=True, description="Repeat: localization against the map "
                                  "(mode fused, grey or mcmanus; windows, RANSAC, gates).")
     # node -----------------------------------------------------------------------------------------------------

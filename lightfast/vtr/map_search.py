@@ -4,8 +4,10 @@ localizes") — the relocalization after a localization failure (20 m on VO alon
 :func:`search_map` tries every keyframe of the teach map as the reference, with ``search_window_radius`` neighbours
 on each side, by :meth:`~lightfast.vtr.localization.MapLocalizer.localize` without a prior (unguided matching, the
 mode's image sources, PROSAC-ordered RANSAC hypotheses, no prior gate); the localization with the most inliers wins
-(first on ties), and its ``runner_up_inliers`` are those of the best successful place farther than
-``search_distinct_m`` along the taught path, so the caller can refuse a place that a look-alike nearly matches.
+(first on ties), and its ``runner_up_inliers`` are those of the best successful localization that puts the camera
+farther than ``search_distinct_m`` along the taught path, so the caller can refuse a place that a look-alike nearly
+matches. (Windows overlap: a window centred a few keyframes away often localizes the camera at the same place with
+its shared keyframes; that is the same place, not a look-alike.)
 Every keyframe lies in up to 2r + 1 windows: during the search each keyframe's landmarks are matched
 to the frame once per source and the matches are combined per window
 (:meth:`~lightfast.vtr.localization.MapLocalizer.unguided_cache`) — exactly the matches of matching each window at
@@ -51,8 +53,9 @@ def search_map(localizer: MapLocalizer, features: Mapping[str, StereoFeatures], 
                 best = loc
     assert best is not None
     if best.success:
-        at = localizer.map.distance_m
+        along = localizer.map.along_path_m
+        at = along(best.ref_index, best.T_ref_cam)
         far = [f.inliers for f in found
-               if abs(at[f.ref_index] - at[best.ref_index]) > localizer.config.search_distinct_m]
+               if abs(along(f.ref_index, f.T_ref_cam) - at) > localizer.config.search_distinct_m]
         best = replace(best, runner_up_inliers=max(far, default=0))
     return best

@@ -216,6 +216,10 @@ class TeachMap:
         n = float(np.linalg.norm(v))
         return v / n if n > 1e-9 else np.array([0.0, 0.0, 1.0])
 
+    def along_path_m(self, index: int, T_kf_cam: NDArray[np.float64]) -> float:
+        """Distance along the taught path (m) of a camera pose given in keyframe ``index``'s frame."""
+        return float(self.distance_m[index] + T_kf_cam[:3, 3] @ self.path_direction(index))
+
     def _check_index(self, index: int) -> None:
         if not 0 <= index < len(self.keyframes):
             raise VtrInputError(f"keyframe index {index} outside the map (0..{len(self.keyframes) - 1})")

@@ -4,9 +4,10 @@ Per rectified stereo frame (:meth:`RepeatPipeline.step`, the call a node makes p
 their ``camera_info`` projection matrices in, :class:`RepeatResult` out):
 
 1. **Front end** (:class:`~lightfast.vtr.teach.SourceFrontEnd`): landmarks of the image sources the mode needs.
-2. **VO on greyscale** (§IV-B 2: "VO is performed using only the greyscale images"): ``T_prev_cur`` from
-   :class:`~lightfast.vtr.visual_odometry.VisualOdometry` propagates the last pose into the prior ``T_kf_cam`` ("The
-   VO estimate is fed to the localizer as a prior, and is used as the final pose estimate if localization fails").
+2. **VO on greyscale** (§IV-B 2: "VO is performed using only the greyscale images"): ``T_prev_cur`` of
+   :class:`~lightfast.vtr.visual_odometry.VisualOdometry` moves the last pose to the prior ``T_kf_cam`` ("The VO
+   estimate is fed to the localizer as a prior, and is used as the final pose estimate if localization fails"; if
+   the VO fails, the prior moves along the taught path at the last localized frames' speed).
 3. **Expected nearest keyframe**: the prior's distance along the taught path (keyframe path distance + the camera
    position projected on the local path direction) → :meth:`~lightfast.vtr.map_store.TeachMap.nearest`; the prior is
    re-expressed in that keyframe's frame.
@@ -24,14 +25,14 @@ their ``camera_info`` projection matrices in, :class:`RepeatResult` out):
 
 Output per frame: :class:`RepeatResult` — ``T_kf_cam`` (the camera in the frame of keyframe ``keyframe_index``, the one
 nearest along the path; metres, REP-103 optical axes), whether this frame localized, inliers per source, the distance
-on VO since the last localization (m), the failure flag and whether the whole-map search succeeded now. ``failure``
-is set on every frame spent in the failure state (including the frame that starts it and the one that ends it by
-relocalizing) and before the first localization: the frames on which the robot would not drive autonomously.
+on VO since the last localization (m), the failure flag (every frame of the failure state, from the one starting it
+to the one relocalizing, and before the first localization: the robot would not drive) and the search's success.
 """
 from __future__ import annotations
 
 import logging
 import time
+from collections import deque
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 
@@ -55,6 +56,10 @@ from lightfast.vtr.vo_prior import add_keyframe_noise, fuse, propagate_covarianc
 __all__ = ["RepeatPipeline", "RepeatResult"]
 
 log = logging.getLogger(__name__)
+
+#: the localized frames (of the last ``2 * _SPEED_FRAMES``) whose positions along the taught path give the speed of
+#: ``follow_path_on_vo_failure``
+_SPEED_FRAMES = 5
 
 
 @dataclass(frozen=True)
@@ -130,6 +135,9 @@ class RepeatPipeline:
         self._lost = False
         self._gated: tuple[int, NDArray[np.float64]] | None = None  # last frame's localization beyond the gate
         self._held: tuple[int, NDArray[np.float64]] | None = None  # last frame's weak place of the search
+        # localized frames: (frame number, stamp_ns, m along the path); the stamp of the frame before this one
+        self._alongs: deque[tuple[int, int, float]] = deque(maxlen=_SPEED_FRAMES)
+        self._last_stamp_ns: int | None = None
         self.frames = 0
         self.failures = 0  # number of localization failures declared (entries into the failure state)
         self.refused_places = 0  # places of the whole-map search refused as ambiguous
@@ -194,6 +202,8 @@ class RepeatPipeline:
         self.frames += 1
         timing: dict[str, float] = {}
         motion = vo.T_prev_cur
+        if not (vo.success or vo.first) and c.follow_path_on_vo_failure:
+            motion = self._path_motion(motion, stamp_ns)
         step_m = 0.0 if vo.first else float(np.linalg.norm(motion[:3, 3]))
         held, self._held = self._held, None  # the previous frame's weak place: confirmed by this frame's search only
 
@@ -284,8 +294,13 @@ class RepeatPipeline:
             self._ref, self._T_ref_cam, self._cov = ref, prior, prior_cov
 
         along = float("nan")
+        if relocalized:
+            self._alongs.clear()
         if self._T_ref_cam is not None:
-            along = self._along(self._ref, self._T_ref_cam)
+            along = self.map.along_path_m(self._ref, self._T_ref_cam)
+            if localized:
+                self._alongs.append((self.frames, int(stamp_ns), along))
+        self._last_stamp_ns = int(stamp_ns)
         empty = {s: 0 for s in self.localizer.sources}
         return RepeatResult(
             stamp_ns=int(stamp_ns),
@@ -348,13 +363,23 @@ class RepeatPipeline:
                      "prior was off", loc.ref_index)
         return agree
 
-    def _along(self, ref: int, T_ref_cam: NDArray[np.float64]) -> float:
-        """Distance along the taught path of a pose given in keyframe ``ref``'s frame (m)."""
-        return float(self.map.distance_m[ref] + T_ref_cam[:3, 3] @ self.map.path_direction(ref))
+    def _path_motion(self, fallback: NDArray[np.float64], stamp_ns: int) -> NDArray[np.float64]:
+        """The motion ``T_prev_cur`` of a camera moving along the taught path's local direction at the speed of the
+        last localized frames (``follow_path_on_vo_failure``: the slope of their positions along the path over their
+        stamps) since the previous frame; ``fallback`` without a pose, without two localized frames among the last
+        ``2 * _SPEED_FRAMES`` or with stamps that do not increase."""
+        recent = [(t, a) for i, t, a in self._alongs if self.frames - i <= 2 * _SPEED_FRAMES]
+        if (self._T_ref_cam is None or self._last_stamp_ns is None or len(recent) < 2
+                or not recent[0][0] < recent[-1][0] <= self._last_stamp_ns < stamp_ns):
+            return fallback
+        distance_m = (recent[-1][1] - recent[0][1]) / (recent[-1][0] - recent[0][0]) * (stamp_ns - self._last_stamp_ns)
+        T = np.eye(4)
+        T[:3, 3] = self._T_ref_cam[:3, :3].T @ self.map.path_direction(self._ref) * distance_m
+        return T
 
     def _reanchor(self, ref: int, T_ref_cam: NDArray[np.float64]) -> tuple[int, NDArray[np.float64]]:
         """The keyframe nearest along the path to a pose and the pose in that keyframe's frame."""
-        k = self.map.nearest(self._along(ref, T_ref_cam))
+        k = self.map.nearest(self.map.along_path_m(ref, T_ref_cam))
         if k == ref:
             return ref, T_ref_cam
         return k, self.map.T_a_b(k, ref) @ T_ref_cam

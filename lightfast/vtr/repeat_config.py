@@ -112,6 +112,11 @@ class RepeatConfig(Config):
         "following localization, 45-108 inliers, fail the gate until the 20 m failure; with no inlier minimum, "
         "consecutive wrong localizations of 13 inliers in the sand of repeat07 were accepted). 0: never.", min=0,
     )
+    follow_path_on_vo_failure: bool = param(
+        True, description="When the VO fails, move the prior along the taught path at the speed of the last frames' "
+        "poses (the robot follows the path) instead of repeating the last VO motion (one wrong VO step before a dark "
+        "stretch otherwise carries a wrong heading and speed into every frame of it).",
+    )
     fuse_vo_prior: bool = param(
         True, description="Fuse an accepted windowed localization with the VO prior by their covariances (the "
         "paper's 'VO estimate is fed to the localizer as a prior'); False: the localization replaces the prior.",
@@ -154,8 +159,8 @@ class RepeatConfig(Config):
         min=1.0,
     )
     search_distinct_m: float = param(
-        5.0, description="Places of the whole-map search this far apart along the taught path count as different "
-        "places for search_margin, m.", min=0.0,
+        5.0, description="Localizations of the whole-map search that put the camera this far apart along the "
+        "taught path count as different places for search_margin, m.", min=0.0,
     )
     search_accept_inliers: int = param(
         40, description="A place of the whole-map search with at least this many inliers is accepted at once; a "

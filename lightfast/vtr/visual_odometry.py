@@ -7,9 +7,12 @@ constant-velocity prediction (the last successful motion) primes guided matching
 (:func:`~lightfast.vtr.landmark_matching.match_landmarks` within ``match_radius_px``); unguided matching is the
 fallback when the guided attempt finds fewer than ``min_inliers`` inliers. The motion comes from
 :func:`~lightfast.vtr.pose_estimation.estimate_pose_stereo` (3-point RANSAC and Levenberg–Marquardt on the stereo
-reprojection error); a motion longer than ``max_translation_m`` is rejected. Most landmarks of an outdoor frame are
-far and fit nearly any translation, so the RANSAC draws all ``ransac_min_iterations`` hypotheses, half of them
-from the nearest landmarks first, and refines the ``ransac_refine_top`` best (``docs/vtr.md``, "The VO's RANSAC").
+reprojection error); a motion longer than ``max_translation_m`` is rejected, and so is one whose translation differs
+from the last successful motion's by more than ``max_step_change_m`` (a robot's velocity hardly changes between
+frames; weak steps at dusk resting on a wrong consensus came out 3.5 m long or 0.5 m backwards between 0.8 m
+ones). Most landmarks of an outdoor frame are far and fit nearly any translation, so the RANSAC draws all
+``ransac_min_iterations`` hypotheses, half of them from the nearest landmarks first, and refines the
+``ransac_refine_top`` best (``docs/vtr.md``, "The VO's RANSAC").
 
 Output per frame: :class:`VoResult` — ``T_prev_cur`` (4×4, current left camera frame → previous one; metres, REP-103
 optical axes), matches, inliers, the inliers' RMS reprojection error (px), the motion's nominal covariance (1 px
@@ -21,7 +24,7 @@ import logging
 from dataclasses import dataclass, field
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from lightfast.config import Config, param
 from lightfast.vtr.errors import VtrInputError
@@ -72,6 +75,12 @@ class VisualOdometryConfig(Config):
     max_translation_m: float = param(
         5.0, description="A frame-to-frame motion longer than this is rejected as a failure, m.", min=0.0
     )
+    max_step_change_m: float = param(
+        1.0, description="A frame-to-frame motion whose translation differs from the last successful one's by more "
+        "than this is rejected as a failure (a change of 1 m between consecutive frames is 1 m/s^2 at 1 Hz), m (0: no "
+        "check).",
+        min=0.0,
+    )
 
 
 @dataclass(frozen=True)
@@ -104,11 +113,13 @@ class VisualOdometry:
         self.config = config or VisualOdometryConfig()
         self._prev: StereoFeatures | None = None
         self._velocity: NDArray[np.float64] = np.eye(4)  # last successful T_prev_cur (constant-velocity prior)
+        self._moved = False  # whether _velocity comes from a successful step
 
     def reset(self) -> None:
         """Forget the previous frame (the next one starts a new VO chain)."""
         self._prev = None
         self._velocity = np.eye(4)
+        self._moved = False
 
     @property
     def prediction(self) -> NDArray[np.float64]:
@@ -117,16 +128,19 @@ class VisualOdometry:
 
     def estimate(
         self, prev: StereoFeatures, cur: StereoFeatures, camera: StereoCamera,
-        T_prev_cur_prior: NDArray[np.float64] | None = None,
+        T_prev_cur_prior: NDArray[np.float64] | None = None, *, last_translation_m: ArrayLike | None = None,
     ) -> VoResult:
         """Motion between two frames without touching the state: guided by ``T_prev_cur_prior`` when given
-        (and ``match_radius_px > 0``), unguided as the fallback."""
+        (and ``match_radius_px > 0``), unguided as the fallback; with ``last_translation_m`` (the last successful
+        motion's translation, m) a motion whose translation differs by more than ``max_step_change_m`` is
+        rejected."""
         c = self.config
         if prev.kind != cur.kind:
             raise VtrInputError(f"cannot match {prev.kind} features with {cur.kind} features")
         max_d = max_descriptor_distance(cur.kind, c.orb_max_distance, c.sift_max_distance)
         attempts = [True, False] if (T_prev_cur_prior is not None and c.match_radius_px > 0) else [False]
         disparity = camera.effective_disparity(cur)
+        last = None if last_translation_m is None else np.asarray(last_translation_m, np.float64).reshape(3)
         result = VoResult(self._velocity.copy(), False, 0, 0, False)
         for guided in attempts:
             i_ref, i_cur, _ = match_landmarks(
@@ -144,6 +158,11 @@ class VisualOdometry:
             success = est.success and step_m <= c.max_translation_m
             if est.success and not success:
                 log.debug("VO rejected: %.2f m between frames exceeds %.2f m", step_m, c.max_translation_m)
+            change_m = 0.0 if last is None else float(np.linalg.norm(est.T_ref_cur[:3, 3] - last))
+            if success and 0 < c.max_step_change_m < change_m:
+                success = False
+                log.debug("VO rejected: %.2f m between frames, %.2f m from the last motion (%d inliers)", step_m,
+                          change_m, est.num_inliers)
             if success:
                 return VoResult(est.T_ref_cur, True, len(i_ref), est.num_inliers, guided, rms_px=est.rms_px,
                                 covariance=est.covariance)
@@ -158,9 +177,11 @@ class VisualOdometry:
         prev, self._prev = self._prev, features
         if prev is None:
             return VoResult(np.eye(4), False, 0, 0, False, first=True)
-        result = self.estimate(prev, features, camera, self._velocity)
+        result = self.estimate(prev, features, camera, self._velocity,
+                               last_translation_m=self._velocity[:3, 3] if self._moved else None)
         if result.success:
             self._velocity = result.T_prev_cur.copy()
+            self._moved = True
         else:
             log.debug("VO failed (%d matches, %d inliers); propagating the constant-velocity prediction",
                       result.num_matches, result.num_inliers)

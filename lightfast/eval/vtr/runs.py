@@ -63,7 +63,8 @@ def _key(*parts: object) -> str:
 
 
 def _teach_key(teach: SimRun, config: VtrLocalizerConfig) -> str:
-    return _key("teach", content_digest(teach.path), config.teach.to_dict(), config.stereo.to_dict())
+    return _key("teach", content_digest(teach.path), config.teach.to_dict(), config.stereo.to_dict(),
+                config.vo.to_dict())
 
 
 def teach_map(teach: SimRun, maps_dir: Path, config: VtrLocalizerConfig | None = None, *,
@@ -76,7 +77,7 @@ def teach_map(teach: SimRun, maps_dir: Path, config: VtrLocalizerConfig | None =
         log.info("reusing the teach map %s", path)
         return MapStore.load(path), key
     maps_dir.mkdir(parents=True, exist_ok=True)
-    tp = TeachPipeline(path, config.teach, stereo=config.stereo, overwrite=True)
+    tp = TeachPipeline(path, config.teach, stereo=config.stereo, vo=config.vo, overwrite=True)
     n = int(teach.info.get("frames", 0)) or None
     t0 = time.perf_counter()
     try:
@@ -101,7 +102,7 @@ def run_repeat(run: SimRun, tmap: TeachMap, teach_truth: Truth, mode: str, *,
     cfg = replace_config(config or VtrLocalizerConfig(), {"repeat.mode": mode})
     truth = load_truth(run.path)
     kf_T = np.stack([teach_truth.T_map_cam[teach_truth.index(kf.stamp_ns)] for kf in tmap.keyframes])
-    rp = RepeatPipeline(tmap, cfg.repeat)
+    rp = RepeatPipeline(tmap, cfg.repeat, vo=cfg.vo)
     spec = run.info["run"]
     out = RepeatRun(run.name, mode, {k: spec.get(k) for k in ("date", "start", "weather", "summary", "kind",
                                                               "paper_repeat")})
@@ -157,7 +158,7 @@ def run_repeat(run: SimRun, tmap: TeachMap, teach_truth: Truth, mode: str, *,
 
 def _job_key(run: SimRun, mode: str, map_key: str, config: VtrLocalizerConfig, max_frames: int | None) -> str:
     return _key("repeat", content_digest(run.path), mode, map_key,
-                replace_config(config, {"repeat.mode": mode}).repeat.to_dict(), max_frames)
+                replace_config(config, {"repeat.mode": mode}).repeat.to_dict(), config.vo.to_dict(), max_frames)
 
 
 _JOB_MAP: dict[str, tuple[TeachMap, Truth]] = {}

@@ -668,6 +668,34 @@ def test_whole_map_search_refuses_a_place_with_a_look_alike(taught: Taught, repe
         rp.close()
 
 
+def test_overlapping_search_windows_are_the_same_place_not_a_look_alike(taught: Taught, repeat_features):
+    """With windows of 4 keyframes on each side, windows centred more than search_distinct_m (3 m) from the best
+    one share its keyframes and localize the camera at the same place with nearly as many inliers. Distinct places
+    are told by where the camera is put along the path, not by the window's centre: the place is not refused."""
+    from lightfast.vtr.localization import MapLocalizer
+
+    localizer = MapLocalizer(taught.teach_map, _repeat_config("fused", search_window_radius=4, search_distinct_m=3.0))
+    camera = StereoCamera.from_projections(P_LEFT, P_RIGHT)
+    found, localize = [], MapLocalizer.localize
+
+    def spy(self, *args, **kwargs):
+        loc = localize(self, *args, **kwargs)
+        if loc.success:
+            found.append(loc)
+        return loc
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(MapLocalizer, "localize", spy)
+        best = localizer.search(repeat_features["teach"][12], camera)
+    tm = taught.teach_map
+    at = tm.along_path_m(best.ref_index, best.T_ref_cam)
+    assert best.success and abs(at - (REPEAT_Z[12] - TEACH_Z[0])) < 0.1
+    same_place = [f for f in found if abs(tm.distance_m[f.ref_index] - tm.distance_m[best.ref_index]) > 3.0
+                  and abs(tm.along_path_m(f.ref_index, f.T_ref_cam) - at) < 0.2]
+    assert max(f.inliers for f in same_place) >= best.inliers / 1.5  # the window-centre rule refused the place
+    assert best.runner_up_inliers < best.inliers / 1.5, (best.inliers, best.runner_up_inliers)
+
+
 def test_a_weak_place_of_the_search_needs_the_next_frame(taught: Taught, repeat_features):
     """A place of the whole-map search below search_accept_inliers is held, not accepted: the next frame's search
     must find it again where the VO motion puts it. Found again: relocalized; the next frame elsewhere (a look-alike
@@ -720,6 +748,58 @@ def test_a_vo_step_gone_astray_along_the_optical_axis_is_mended_when_the_step_sa
         kf_z = taught.kf_pose[b.keyframe_index][2, 3]
         error_m = abs(kf_z + b.T_kf_cam[2, 3] - REPEAT_Z[13])
         assert b.localized == mended and (error_m < 0.1 if mended else error_m > 0.7), (z_std, sigmas, error_m)
+        rp.close()
+
+
+def test_vo_rejects_a_step_whose_translation_jumps_from_the_last_one(taught: Taught):
+    """Consecutive teach frames are 0.6 m apart along z: the step is kept after a step within 1 m of it (0.6 m, 1.5 m
+    forward, 0.6 m sideways), rejected (a failure) after one 2 m forward or 0.6 m backwards, and kept again with the
+    check off."""
+    from lightfast.vtr.visual_odometry import VisualOdometry, VisualOdometryConfig
+
+    camera = StereoCamera.from_projections(P_LEFT, P_RIGHT)
+    prev, cur = taught.features[5]["grey"], taught.features[6]["grey"]
+    vo = VisualOdometry()
+    for last, kept in ((None, True), ((0, 0, 0.6), True), ((0, 0, 1.5), True), ((0.6, 0, 0), True),
+                       ((0, 0, 2.0), False), ((0, 0, -0.6), False)):
+        r = vo.estimate(prev, cur, camera, last_translation_m=last)
+        assert r.success == kept and r.num_inliers > 50, (last, r)
+        if kept:
+            assert abs(r.T_prev_cur[2, 3] - 0.6) < 0.03
+    off = VisualOdometry(VisualOdometryConfig(max_step_change_m=0.0))
+    assert off.estimate(prev, cur, camera, last_translation_m=(0, 0, 2.0)).success
+
+
+def test_a_dark_stretch_follows_the_taught_path_at_the_last_speed(taught: Taught, repeat_features):
+    """Four localized frames, then four black ones (no landmarks) whose VO fails with a wrong constant-velocity
+    prediction (0.5 m sideways): with follow_path_on_vo_failure the prior moves along the taught path at the
+    localized frames' 0.5 m per frame and ends within 0.1 m of the truth; repeating the VO prediction ends > 1 m
+    off."""
+    from lightfast.vtr.visual_odometry import VoResult
+
+    camera = StereoCamera.from_projections(P_LEFT, P_RIGHT)
+    front = SourceFrontEnd(("grey", "fv", "fr"), StereoConfig(), ColorConstantConfig())
+    black = front.process(np.zeros((H, W, 3), np.uint8), np.zeros((H, W, 3), np.uint8), P_LEFT, P_RIGHT)
+    front.close()
+    truth = [pose(REPEAT_X, z, REPEAT_YAW_DEG) for z in REPEAT_Z]
+    wrong = np.eye(4)
+    wrong[:3, 3] = [0.5, 0.0, 0.0]
+    for follow, within in ((True, True), (False, False)):
+        rp = RepeatPipeline(taught.teach_map, _repeat_config("fused", initial_keyframe=0,
+                                                             follow_path_on_vo_failure=follow))
+        for i in range(4, 12):
+            if i == 4:
+                vo = VoResult(np.eye(4), False, 0, 0, False, first=True)
+            elif i < 8:
+                vo = VoResult(np.linalg.inv(truth[i - 1]) @ truth[i], True, 100, 100, True)
+            else:
+                vo = VoResult(wrong, False, 0, 0, False)
+            r = rp._localize_step(i * STAMP_STEP_NS, vo, repeat_features["teach"][i] if i < 8 else black, camera,
+                                  None)
+            assert r.localized == (i < 8), (follow, i)
+        true_kf_cam = np.linalg.inv(taught.kf_pose[r.keyframe_index]) @ truth[11]
+        error_m = float(np.linalg.norm(r.T_kf_cam[:3, 3] - true_kf_cam[:3, 3]))
+        assert (error_m < 0.1) if within else (error_m > 1.0), (follow, error_m)
         rp.close()
 
 
