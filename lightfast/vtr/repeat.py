@@ -65,10 +65,10 @@ _SPEED_FRAMES = 5
 @dataclass(frozen=True)
 class RepeatResult:
     """One repeat step (module docstring). ``T_kf_cam`` is ``None`` (and ``keyframe_index`` −1) until the first
-    localization; ``T_prev_cur`` is the VO motion used (m); ``distance_along_path_m`` the position along the taught
-    path; ``covariance`` that of the pose on localized frames (6×6, ξ = (ρ, φ) in ``T_kf_cam · exp(ξ)``, camera
-    frame: the localization's nominal one × ``localization_cov_scale²``, fused with the VO prior's), else ``None``;
-    ``timing_s`` the time per stage (s)."""
+    localization; ``T_prev_cur`` is the motion used (m; the VO's, or along the path after a VO failure);
+    ``distance_along_path_m`` the position along the taught path; ``covariance`` that of the pose on localized frames
+    (6×6, ξ = (ρ, φ) in ``T_kf_cam · exp(ξ)``, camera frame: the localization's nominal one ×
+    ``localization_cov_scale²``, fused with the VO prior's), else ``None``; ``timing_s`` the time per stage (s)."""
 
     stamp_ns: int
     T_kf_cam: NDArray[np.float64] | None

@@ -36,6 +36,10 @@ __all__ = ["VisualOdometry", "VisualOdometryConfig", "VoResult"]
 
 log = logging.getLogger(__name__)
 
+#: frames after which the last successful motion is too old to be the reference of ``max_step_change_m`` (the check is
+#: then off, so that a wrong reference cannot lock the VO out)
+STALE_FRAMES = 5
+
 
 @dataclass(frozen=True)
 class VisualOdometryConfig(Config):
@@ -76,9 +80,9 @@ class VisualOdometryConfig(Config):
         5.0, description="A frame-to-frame motion longer than this is rejected as a failure, m.", min=0.0
     )
     max_step_change_m: float = param(
-        1.0, description="A frame-to-frame motion whose translation differs from the last successful one's by more "
-        "than this is rejected as a failure (a change of 1 m between consecutive frames is 1 m/s^2 at 1 Hz), m (0: no "
-        "check).",
+        1.0, description="A frame-to-frame motion whose translation differs from the last successful one's (of the "
+        "last 5 frames) by more than this is rejected as a failure (a change of 1 m between consecutive frames is "
+        "1 m/s^2 at 1 Hz), m (0: no check).",
         min=0.0,
     )
 
@@ -113,13 +117,13 @@ class VisualOdometry:
         self.config = config or VisualOdometryConfig()
         self._prev: StereoFeatures | None = None
         self._velocity: NDArray[np.float64] = np.eye(4)  # last successful T_prev_cur (constant-velocity prior)
-        self._moved = False  # whether _velocity comes from a successful step
+        self._failed = STALE_FRAMES  # frames since the last successful step (STALE_FRAMES or more: none recent)
 
     def reset(self) -> None:
         """Forget the previous frame (the next one starts a new VO chain)."""
         self._prev = None
         self._velocity = np.eye(4)
-        self._moved = False
+        self._failed = STALE_FRAMES
 
     @property
     def prediction(self) -> NDArray[np.float64]:
@@ -178,11 +182,12 @@ class VisualOdometry:
         if prev is None:
             return VoResult(np.eye(4), False, 0, 0, False, first=True)
         result = self.estimate(prev, features, camera, self._velocity,
-                               last_translation_m=self._velocity[:3, 3] if self._moved else None)
+                               last_translation_m=self._velocity[:3, 3] if self._failed < STALE_FRAMES else None)
         if result.success:
             self._velocity = result.T_prev_cur.copy()
-            self._moved = True
+            self._failed = 0
         else:
+            self._failed += 1
             log.debug("VO failed (%d matches, %d inliers); propagating the constant-velocity prediction",
                       result.num_matches, result.num_inliers)
         return result

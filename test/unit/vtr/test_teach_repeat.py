@@ -754,7 +754,7 @@ def test_a_vo_step_gone_astray_along_the_optical_axis_is_mended_when_the_step_sa
 def test_vo_rejects_a_step_whose_translation_jumps_from_the_last_one(taught: Taught):
     """Consecutive teach frames are 0.6 m apart along z: the step is kept after a step within 1 m of it (0.6 m, 1.5 m
     forward, 0.6 m sideways), rejected (a failure) after one 2 m forward or 0.6 m backwards, and kept again with the
-    check off."""
+    check off. A wrong reference does not lock the VO out: it is dropped after STALE_FRAMES failures."""
     from lightfast.vtr.visual_odometry import VisualOdometry, VisualOdometryConfig
 
     camera = StereoCamera.from_projections(P_LEFT, P_RIGHT)
@@ -768,6 +768,14 @@ def test_vo_rejects_a_step_whose_translation_jumps_from_the_last_one(taught: Tau
             assert abs(r.T_prev_cur[2, 3] - 0.6) < 0.03
     off = VisualOdometry(VisualOdometryConfig(max_step_change_m=0.0))
     assert off.estimate(prev, cur, camera, last_translation_m=(0, 0, 2.0)).success
+    # a wrong reference (2.5 m) cannot lock the VO out: it is stale after STALE_FRAMES failures
+    from lightfast.vtr.visual_odometry import STALE_FRAMES
+
+    vo.process(taught.features[5]["grey"], camera)
+    vo._velocity[2, 3], vo._failed = 2.5, 0
+    results = [vo.process(taught.features[i]["grey"], camera) for i in range(6, 8 + STALE_FRAMES)]
+    assert [r.success for r in results] == [False] * STALE_FRAMES + [True] * 2
+    assert abs(results[-1].T_prev_cur[2, 3] - 0.6) < 0.03
 
 
 def test_a_dark_stretch_follows_the_taught_path_at_the_last_speed(taught: Taught, repeat_features):
