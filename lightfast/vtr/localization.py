@@ -84,12 +84,16 @@ class PriorGate:
     radius_m: float = math.inf
     position_cov: NDArray[np.float64] | None = None
     sigmas: float = 0.0
+    #: fewest inliers of a localization admitted by the Mahalanobis test (beyond ``radius_m``)
+    min_inliers_beyond_radius: int = 0
 
-    def admits(self, offset_m: NDArray[np.float64]) -> bool:
-        """Whether a localization ``offset_m`` (3,) from the prior's position passes."""
+    def admits(self, offset_m: NDArray[np.float64], inliers: int | None = None) -> bool:
+        """Whether a localization ``offset_m`` (3,) from the prior's position, with ``inliers``, passes."""
         if float(np.linalg.norm(offset_m)) <= self.radius_m:
             return True
         if self.position_cov is None or self.sigmas <= 0.0 or not np.all(np.isfinite(self.position_cov)):
+            return False
+        if inliers is not None and inliers < self.min_inliers_beyond_radius:
             return False
         try:
             d2 = float(offset_m @ np.linalg.solve(self.position_cov, offset_m))
@@ -217,7 +221,7 @@ class MapLocalizer:
         gated = False
         if success and T_ref_cam_prior is not None and gate is not None:
             offset = est.T_ref_cur[:3, 3] - T_ref_cam_prior[:3, 3]
-            if not gate.admits(offset):
+            if not gate.admits(offset, est.num_inliers):
                 success, gated = False, True
                 log.debug("localization at keyframe %d rejected: %d inliers but %.2f m from the VO prior (gate "
                           "%.2f m)", ref, est.num_inliers, float(np.linalg.norm(offset)), gate.radius_m)

@@ -19,9 +19,9 @@ their ``camera_info`` projection matrices in, :class:`RepeatResult` out):
 5. **Failure handling** (§IV-C): without success the VO prior is the pose and the distance driven on VO alone
    accumulates; beyond ``max_distance_on_vo_m`` (20 m) it is a **localization failure**: the robot "stops" and the
    whole map is searched (:mod:`lightfast.vtr.map_search`) every frame until a place has the evidence that rules
-   out look-alikes (``search_min_inliers``, ``search_margin``, and below ``search_accept_inliers`` the next frame's
-   search finding it again; ``relocalized``). Before the first localization likewise ("the map is searched until the
-   live stereo feed localizes"); with ``initial_keyframe`` its window is tried until the failure distance.
+   out look-alikes (``search_min_inliers``, ``search_margin``, and below ``search_accept_inliers`` a search of the
+   next ``search_hold_frames`` finding it again; ``relocalized``; the gate then widens by ``search_gate_sigmas``).
+   Before the first localization likewise; with ``initial_keyframe`` its window is tried until the failure distance.
 
 Output per frame: :class:`RepeatResult` — ``T_kf_cam`` (the camera in the frame of keyframe ``keyframe_index``, the one
 nearest along the path; metres, REP-103 optical axes), whether this frame localized, inliers per source, the distance
@@ -133,8 +133,10 @@ class RepeatPipeline:
         self._cov: NDArray[np.float64] | None = None  # of _T_ref_cam (vo_prior's convention); None: unknown
         self._distance_on_vo_m = 0.0
         self._lost = False
+        self._after_search = False  # the pose comes from a place of the whole-map search (search_gate_sigmas)
         self._gated: tuple[int, NDArray[np.float64]] | None = None  # last frame's localization beyond the gate
-        self._held: tuple[int, NDArray[np.float64]] | None = None  # last frame's weak place of the search
+        # weak places of the whole-map search: (frame number, keyframe, T_ref_cam moved to the last frame)
+        self._held: list[tuple[int, int, NDArray[np.float64]]] = []
         # localized frames: (frame number, stamp_ns, m along the path); the stamp of the frame before this one
         self._alongs: deque[tuple[int, int, float]] = deque(maxlen=_SPEED_FRAMES)
         self._last_stamp_ns: int | None = None
@@ -205,7 +207,8 @@ class RepeatPipeline:
         if not (vo.success or vo.first) and c.follow_path_on_vo_failure:
             motion = self._path_motion(motion, stamp_ns)
         step_m = 0.0 if vo.first else float(np.linalg.norm(motion[:3, 3]))
-        held, self._held = self._held, None  # the previous frame's weak place: confirmed by this frame's search only
+        # the weak places of the last search_hold_frames frames' searches, moved by the motion to this frame
+        self._held = [(f, ref, T @ motion) for f, ref, T in self._held if self.frames - f <= c.search_hold_frames]
 
         ref, prior, prior_cov = -1, None, None
         if self._T_ref_cam is not None:
@@ -227,12 +230,15 @@ class RepeatPipeline:
         if prior is not None and not self._lost:
             gate = None
             if c.prior_gate_m > 0:
+                sigmas, min_inliers = c.prior_gate_sigmas, c.confirm_beyond_gate_inliers
+                if self._after_search and c.search_gate_sigmas > 0:
+                    sigmas, min_inliers = max(sigmas, c.search_gate_sigmas), c.search_min_inliers
                 position_cov = None  # only the Mahalanobis widening reads it
-                if prior_cov is not None and c.prior_gate_sigmas > 0:
+                if prior_cov is not None and sigmas > 0:
                     R = prior[:3, :3]
                     position_cov = R @ prior_cov[:3, :3] @ R.T
                 gate = PriorGate(c.prior_gate_m + c.prior_gate_per_m * (self._distance_on_vo_m + step_m),
-                                 position_cov, c.prior_gate_sigmas)
+                                 position_cov, sigmas, min_inliers)
             loc = self.localizer.localize(features, camera, ref, self.map.window(ref, c.window_radius), prior, more,
                                           gate)
             localized = loc.success or self._confirmed(loc, motion)
@@ -263,17 +269,18 @@ class RepeatPipeline:
                     loc = self._scaled(self.localizer.search(features, camera, more))
                     timing["search"] = time.perf_counter() - t
                     searched = True
-                    if loc.success and self._unambiguous(loc) and self._found_again(loc, held, motion):
+                    if loc.success and self._unambiguous(loc) and self._found_again(loc):
                         localized = relocalized = True
                         self._lost = False
+                        self._held.clear()
                         log.info("relocalized at keyframe %d with %d inliers (next distinct place %d)",
                                  loc.ref_index, loc.inliers, loc.runner_up_inliers)
                     elif loc.success and self._unambiguous(loc):
-                        self._held = (loc.ref_index, loc.T_ref_cam)
+                        self._held.append((self.frames, loc.ref_index, loc.T_ref_cam))
                         self.held_places += 1
-                        log.info("whole-map search: keyframe %d with %d inliers held until the next frame's search "
-                                 "finds it again (accepted at once from %d)", loc.ref_index, loc.inliers,
-                                 c.search_accept_inliers)
+                        log.info("whole-map search: keyframe %d with %d inliers held until a search of the next %d "
+                                 "frames finds it again (accepted at once from %d)", loc.ref_index, loc.inliers,
+                                 c.search_hold_frames, c.search_accept_inliers)
                     elif loc.success:
                         self.refused_places += 1
                         log.info("whole-map search: keyframe %d with %d inliers refused (a distinct place has %d; "
@@ -285,6 +292,7 @@ class RepeatPipeline:
             self._gated = (loc.ref_index, loc.T_ref_cam)
         if localized:
             assert loc is not None
+            self._after_search = relocalized
             self._distance_on_vo_m = 0.0
             self._ref, self._T_ref_cam = self._reanchor(loc.ref_index, loc.T_ref_cam)
             self._cov = loc.covariance if np.all(np.isfinite(loc.covariance)) else None
@@ -331,21 +339,21 @@ class RepeatPipeline:
         c = self.config
         return loc.inliers >= c.search_min_inliers and loc.inliers >= c.search_margin * loc.runner_up_inliers
 
-    def _found_again(self, loc: Localization, held: tuple[int, NDArray[np.float64]] | None,
-                     motion: NDArray[np.float64]) -> bool:
+    def _found_again(self, loc: Localization) -> bool:
         """Whether an unambiguous place of the search is accepted: at once with ``search_accept_inliers``, else when
-        the previous frame's search held a place that, moved by the VO ``motion``, lies within ``search_agree_m``."""
+        the search of one of the last ``search_hold_frames`` frames held a place that, moved by the motion since,
+        lies within ``search_agree_m``."""
         c = self.config
         if loc.inliers >= c.search_accept_inliers:
             return True
-        return held is not None and self._offset_m(loc, held, motion) <= c.search_agree_m
+        return any(self._offset_m(loc, (ref, T)) <= c.search_agree_m for _, ref, T in self._held)
 
     def _offset_m(self, loc: Localization, previous: tuple[int, NDArray[np.float64]],
-                  motion: NDArray[np.float64]) -> float:
-        """Distance (m) between ``loc``'s camera and the previous frame's place ``(keyframe, T_ref_cam)`` moved by the
-        VO ``motion`` between the frames."""
+                  motion: NDArray[np.float64] | None = None) -> float:
+        """Distance (m) between ``loc``'s camera and an earlier place ``(keyframe, T_ref_cam)`` moved by the motion
+        ``motion`` between the frames (None: already moved)."""
         ref, T_ref_cam = previous
-        expected = self.map.T_a_b(loc.ref_index, ref) @ T_ref_cam @ motion
+        expected = self.map.T_a_b(loc.ref_index, ref) @ (T_ref_cam if motion is None else T_ref_cam @ motion)
         return float(np.linalg.norm(loc.T_ref_cam[:3, 3] - expected[:3, 3]))
 
     def _strong_beyond_gate(self, loc: Localization) -> bool:

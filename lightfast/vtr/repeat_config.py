@@ -98,12 +98,18 @@ class RepeatConfig(Config):
         0.1, description="Growth of the prior gate per metre driven on VO alone (allowed VO drift), m/m.", min=0.0,
     )
     prior_gate_sigmas: float = param(
-        0.0, description="The prior gate also admits a localization within this many standard deviations of the VO "
-        "prior's own position uncertainty (Mahalanobis; a VO step resting on far points is uncertain along the "
-        "optical axis, and the localization that mends it lies there). 0: the radius alone. Off: at 3 it mended "
-        "development route 45863's sunset VO errors (7.3 m instead of 18.0 m > 1 m off after the first "
-        "localizations of repeats 06/07/10) but admitted localizations ~1 m off on route 14489 and wrong greyscale "
-        "ones in the unit test's changed lighting (docs/vtr.md).", min=0.0,
+        3.0, description="The prior gate also admits a localization with confirm_beyond_gate_inliers inliers within "
+        "this many standard deviations of the VO prior's own position uncertainty (Mahalanobis; a VO step resting on "
+        "far points is uncertain along the optical axis, and the localization that mends it lies there). 0: the "
+        "radius alone. Without the inlier minimum it admitted wrong greyscale localizations in the unit test's "
+        "changed lighting (docs/vtr.md, 'Gates that follow the uncertainty').", min=0.0,
+    )
+    search_gate_sigmas: float = param(
+        3.0, description="From a place of the whole-map search until the next windowed localization is accepted, the "
+        "prior gate also admits a localization with search_min_inliers inliers within this many standard deviations "
+        "of the prior's position uncertainty (the search's own covariance, propagated): a place found on far "
+        "landmarks is uncertain along the optical axis, and prior_gate_m alone would protect its error. 0: off.",
+        min=0.0,
     )
     confirm_beyond_gate_inliers: int = param(
         30, description="Accept a windowed localization beyond the prior gate when it and the previous frame's, also "
@@ -164,9 +170,14 @@ class RepeatConfig(Config):
     )
     search_accept_inliers: int = param(
         40, description="A place of the whole-map search with at least this many inliers is accepted at once; a "
-        "weaker one (search_min_inliers up to this) only when the next frame's search finds it again, where the VO "
-        "motion between the frames puts it (within search_agree_m): a look-alike seldom wins twice in a row. On the "
-        "development routes the wrong places accepted had 12-19 inliers, the right ones 30-800.", min=0,
+        "weaker one (search_min_inliers up to this) only when a later search (search_hold_frames) finds it again, "
+        "where the VO motion between the frames puts it (within search_agree_m): a look-alike seldom wins twice. On "
+        "the development routes the wrong places accepted had 12-19 inliers, the right ones 30-800.", min=0,
+    )
+    search_hold_frames: int = param(
+        3, description="A weak place of the whole-map search (below search_accept_inliers) is held this many frames, "
+        "moved by the VO motion, for a later search to find it again (1: the next frame only; at dusk every other "
+        "frame's search may find too little).", min=1,
     )
     search_agree_m: float = param(
         1.0, description="Two consecutive places of the whole-map search agree when their camera positions, after "

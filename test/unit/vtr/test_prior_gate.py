@@ -25,3 +25,12 @@ def test_the_gate_widens_along_the_priors_uncertain_axis_only() -> None:
     assert not PriorGate(0.5, cov, sigmas=2.0).admits(along)
     assert not PriorGate(0.5, np.full((3, 3), np.inf), sigmas=3.0).admits(along)
     assert not PriorGate(0.5, np.zeros((3, 3)), sigmas=3.0).admits(along)
+
+
+def test_the_widened_gate_can_ask_for_more_inliers() -> None:
+    """After a search the widening admits only localizations with ``min_inliers_beyond_radius`` inliers; within the
+    radius any count passes."""
+    gate = PriorGate(0.5, np.diag([0.05**2, 0.05**2, 0.5**2]), sigmas=3.0, min_inliers_beyond_radius=12)
+    along = np.array([0.0, 0.0, 1.2])
+    assert gate.admits(along, 12) and not gate.admits(along, 11)
+    assert gate.admits(np.array([0.0, 0.0, 0.4]), 6)

@@ -724,12 +724,77 @@ def test_a_weak_place_of_the_search_needs_the_next_frame(taught: Taught, repeat_
         rp.close()
 
 
+def test_a_weak_place_is_held_over_a_frame_whose_search_finds_nothing(taught: Taught, repeat_features):
+    """At dusk every other frame's search may find too little. A weak place held at frame 12 is found again by
+    frame 14's search after a black frame 13 (no landmarks) when search_hold_frames is 2 or more, with the two VO
+    steps between them; with 1 (the next frame only) frame 14's place is held anew instead."""
+    from lightfast.vtr.visual_odometry import VoResult
+
+    camera = StereoCamera.from_projections(P_LEFT, P_RIGHT)
+    feats = repeat_features["teach"]
+    front = SourceFrontEnd(("grey", "fv", "fr"), StereoConfig(), ColorConstantConfig())
+    black = front.process(np.zeros((H, W, 3), np.uint8), np.zeros((H, W, 3), np.uint8), P_LEFT, P_RIGHT)
+    front.close()
+    truth = [pose(REPEAT_X, z, REPEAT_YAW_DEG) for z in REPEAT_Z]
+    steps = [VoResult(np.linalg.inv(truth[i - 1]) @ truth[i], True, 50, 50, True) for i in (13, 14)]
+    for hold, expected in ((3, True), (2, True), (1, False)):
+        rp = RepeatPipeline(taught.teach_map, _repeat_config("fused", search_accept_inliers=10**6,
+                                                             search_hold_frames=hold))
+        a = rp._localize_step(0, VoResult(np.eye(4), True, 0, 0, False, first=True), feats[12], camera, None)
+        dark = rp._localize_step(STAMP_STEP_NS, steps[0], black, camera, None)
+        b = rp._localize_step(2 * STAMP_STEP_NS, steps[1], feats[14], camera, None)
+        assert not a.localized and not dark.localized and b.relocalized == expected, (hold, b)
+        assert rp.held_places == (1 if expected else 2)
+        if expected:
+            kf_z = taught.kf_pose[b.keyframe_index][2, 3]
+            assert abs(kf_z + b.T_kf_cam[2, 3] - REPEAT_Z[14]) < 0.1
+        rp.close()
+
+
+def test_a_search_place_off_along_the_optical_axis_is_mended_by_the_next_localization(taught: Taught,
+                                                                                      repeat_features):
+    """A place of the whole-map search found on far landmarks may be metres off along the optical axis, and its
+    covariance says so. Planted: the search's place 1.5 m too far along z with a 1.5 m standard deviation there. The
+    next frame's correct localization lies beyond the 0.5 m gate radius: with search_gate_sigmas (3) it is admitted
+    and the pose mended; with 0, or when the place claims 5 cm along z, it is refused and the pose stays off
+    (prior_gate_sigmas off, which would admit this strong localization as well)."""
+    from dataclasses import replace as dc_replace
+
+    from lightfast.vtr.visual_odometry import VoResult
+
+    camera = StereoCamera.from_projections(P_LEFT, P_RIGHT)
+    feats = repeat_features["teach"]
+    motion = np.linalg.inv(pose(REPEAT_X, REPEAT_Z[12], REPEAT_YAW_DEG)) @ pose(REPEAT_X, REPEAT_Z[13],
+                                                                                REPEAT_YAW_DEG)
+    for sigmas, z_std, mended in ((3.0, 1.5, True), (0.0, 1.5, False), (3.0, 0.05, False)):
+        rp = RepeatPipeline(taught.teach_map, _repeat_config("fused", search_accept_inliers=0,
+                                                             search_gate_sigmas=sigmas, prior_gate_sigmas=0.0,
+                                                             localization_cov_scale=1.0))
+        search = rp.localizer.search
+
+        def off_search(*args, search=search, z_std=z_std, **kwargs):
+            loc = search(*args, **kwargs)
+            T = loc.T_ref_cam.copy()
+            T[:3, 3] += T[:3, 2] * 1.5  # 1.5 m along the camera's optical axis
+            return dc_replace(loc, T_ref_cam=T, covariance=np.diag([0.05**2, 0.05**2, z_std**2] + [1e-6] * 3))
+
+        rp.localizer.search = off_search
+        a = rp._localize_step(0, VoResult(np.eye(4), True, 0, 0, False, first=True), feats[12], camera, None)
+        b = rp._localize_step(STAMP_STEP_NS, VoResult(motion, True, 50, 50, True), feats[13], camera, None)
+        kf_z = taught.kf_pose[b.keyframe_index][2, 3]
+        error_m = abs(kf_z + b.T_kf_cam[2, 3] - REPEAT_Z[13])
+        assert a.relocalized and b.localized == mended, (sigmas, z_std, b)
+        assert error_m < 0.1 if mended else error_m > 1.2, (sigmas, z_std, error_m)
+        rp.close()
+
+
 def test_a_vo_step_gone_astray_along_the_optical_axis_is_mended_when_the_step_says_so(taught: Taught,
                                                                                      repeat_features):
     """A VO step 0.8 m too long along the optical axis puts the prior beyond the 0.63 m gate radius of the correct
     localization. When the step's own covariance says it is 0.5 m uncertain along that axis (a step resting on far
     points), the gate admits the localization (1.6 sigma) and the pose is mended; when the step claims 1 cm, or
-    without prior_gate_sigmas, the localization is refused and the pose stays 0.8 m off."""
+    without prior_gate_sigmas, the localization is refused and the pose stays 0.8 m off (search_gate_sigmas off: the
+    first frame is a place of the search)."""
     from lightfast.vtr.visual_odometry import VoResult
 
     camera = StereoCamera.from_projections(P_LEFT, P_RIGHT)
@@ -742,7 +807,7 @@ def test_a_vo_step_gone_astray_along_the_optical_axis_is_mended_when_the_step_sa
     for z_std, sigmas, mended in ((0.5, 3.0, True), (0.01, 3.0, False), (0.5, 0.0, False)):
         step = VoResult(astray, True, 50, 50, True, covariance=np.diag([0.01**2, 0.01**2, z_std**2] + [1e-8] * 3))
         rp = RepeatPipeline(taught.teach_map, _repeat_config("fused", search_accept_inliers=0, vo_cov_scale=1.0,
-                                                             prior_gate_sigmas=sigmas))
+                                                             prior_gate_sigmas=sigmas, search_gate_sigmas=0.0))
         assert rp._localize_step(0, first, feats[12], camera, None).localized
         b = rp._localize_step(STAMP_STEP_NS, step, feats[13], camera, None)
         kf_z = taught.kf_pose[b.keyframe_index][2, 3]
