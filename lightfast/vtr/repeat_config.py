@@ -180,8 +180,8 @@ class RepeatConfig(Config):
         "frame's search may find too little).", min=1,
     )
     search_agree_m: float = param(
-        1.0, description="Two consecutive places of the whole-map search agree when their camera positions, after "
-        "the VO motion between the frames, are this close, m.", min=0.0,
+        1.0, description="A held place of the whole-map search, moved by the VO motion since, and this frame's place "
+        "agree when their camera positions are this close, m.", min=0.0,
     )
     initial_keyframe: int = param(
         -1, description="Keyframe where the repeat starts (-1: search the whole map for the first localization).",

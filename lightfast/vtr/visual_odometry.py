@@ -162,7 +162,8 @@ class VisualOdometry:
             success = est.success and step_m <= c.max_translation_m
             if est.success and not success:
                 log.debug("VO rejected: %.2f m between frames exceeds %.2f m", step_m, c.max_translation_m)
-            change_m = 0.0 if last is None else float(np.linalg.norm(est.T_ref_cur[:3, 3] - last))
+            change_m = 0.0 if (last is None or c.max_step_change_m <= 0) else float(
+                np.linalg.norm(est.T_ref_cur[:3, 3] - last))
             if success and 0 < c.max_step_change_m < change_m:
                 success = False
                 log.debug("VO rejected: %.2f m between frames, %.2f m from the last motion (%d inliers)", step_m,
