@@ -228,19 +228,8 @@ class RepeatPipeline:
             self._distance_on_vo_m + step_m <= c.max_distance_on_vo_m)
         t = time.perf_counter()
         if prior is not None and not self._lost:
-            gate = None
-            if c.prior_gate_m > 0:
-                sigmas, min_inliers = c.prior_gate_sigmas, c.confirm_beyond_gate_inliers
-                if self._after_search and c.search_gate_sigmas > 0:
-                    sigmas, min_inliers = max(sigmas, c.search_gate_sigmas), c.search_min_inliers
-                position_cov = None  # only the Mahalanobis widening reads it
-                if prior_cov is not None and sigmas > 0:
-                    R = prior[:3, :3]
-                    position_cov = R @ prior_cov[:3, :3] @ R.T
-                gate = PriorGate(c.prior_gate_m + c.prior_gate_per_m * (self._distance_on_vo_m + step_m),
-                                 position_cov, sigmas, min_inliers)
             loc = self.localizer.localize(features, camera, ref, self.map.window(ref, c.window_radius), prior, more,
-                                          gate)
+                                          self._prior_gate(prior, prior_cov, step_m))
             localized = loc.success or self._confirmed(loc, motion)
             loc = self._scaled(loc)
             if loc.success and c.fuse_vo_prior and prior_cov is not None:
@@ -348,13 +337,30 @@ class RepeatPipeline:
             return True
         return any(self._offset_m(loc, (ref, T)) <= c.search_agree_m for _, ref, T in self._held)
 
-    def _offset_m(self, loc: Localization, previous: tuple[int, NDArray[np.float64]],
-                  motion: NDArray[np.float64] | None = None) -> float:
-        """Distance (m) between ``loc``'s camera and an earlier place ``(keyframe, T_ref_cam)`` moved by the motion
-        ``motion`` between the frames (None: already moved)."""
-        ref, T_ref_cam = previous
-        expected = self.map.T_a_b(loc.ref_index, ref) @ (T_ref_cam if motion is None else T_ref_cam @ motion)
+    def _offset_m(self, loc: Localization, place: tuple[int, NDArray[np.float64]]) -> float:
+        """Distance (m) between ``loc``'s camera and ``place`` = ``(keyframe, T_ref_cam)`` (an earlier frame's, moved to
+        this frame)."""
+        ref, T_ref_cam = place
+        expected = self.map.T_a_b(loc.ref_index, ref) @ T_ref_cam
         return float(np.linalg.norm(loc.T_ref_cam[:3, 3] - expected[:3, 3]))
+
+    def _prior_gate(self, prior: NDArray[np.float64], prior_cov: NDArray[np.float64] | None,
+                    step_m: float) -> PriorGate | None:
+        """The gate of this frame's windowed localization: ``prior_gate_m`` grown with the distance on VO, widened by
+        the prior's position covariance (``prior_gate_sigmas`` with ``confirm_beyond_gate_inliers`` inliers; after a
+        place of the search ``search_gate_sigmas`` with ``search_min_inliers``); None without a gate."""
+        c = self.config
+        if c.prior_gate_m <= 0:
+            return None
+        sigmas, min_inliers = c.prior_gate_sigmas, c.confirm_beyond_gate_inliers
+        if self._after_search and c.search_gate_sigmas > 0:
+            sigmas, min_inliers = max(sigmas, c.search_gate_sigmas), c.search_min_inliers
+        position_cov = None  # only the Mahalanobis widening reads it
+        if prior_cov is not None and sigmas > 0:
+            R = prior[:3, :3]
+            position_cov = R @ prior_cov[:3, :3] @ R.T
+        return PriorGate(c.prior_gate_m + c.prior_gate_per_m * (self._distance_on_vo_m + step_m), position_cov,
+                         sigmas, min_inliers)
 
     def _strong_beyond_gate(self, loc: Localization) -> bool:
         """Rejected by the prior gate only, with ``confirm_beyond_gate_inliers`` (> 0) inliers."""
@@ -365,7 +371,8 @@ class RepeatPipeline:
         the VO ``motion`` between them."""
         if self._gated is None or not self._strong_beyond_gate(loc):
             return False
-        agree = self._offset_m(loc, self._gated, motion) <= self.config.prior_gate_m
+        ref, T_ref_cam = self._gated
+        agree = self._offset_m(loc, (ref, T_ref_cam @ motion)) <= self.config.prior_gate_m
         if agree:
             log.info("localization at keyframe %d beyond the prior gate confirmed by the previous frame's: the VO "
                      "prior was off", loc.ref_index)

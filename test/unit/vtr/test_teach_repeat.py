@@ -251,6 +251,15 @@ def repeat_features(scene: Scene) -> dict[str, list]:
     return out
 
 
+@pytest.fixture(scope="module")
+def black_features():
+    """Front-end output of a black stereo pair (no landmarks: the search and the VO find nothing)."""
+    front = SourceFrontEnd(("grey", "fv", "fr"), StereoConfig(), ColorConstantConfig())
+    black = front.process(np.zeros((H, W, 3), np.uint8), np.zeros((H, W, 3), np.uint8), P_LEFT, P_RIGHT)
+    front.close()
+    return black
+
+
 def _repeat_config(mode: str, **kw) -> RepeatConfig:
     return RepeatConfig(mode=mode, **({"match_radius_px": 25.0} | kw))  # 25 px at 320×240 ~ 50 px at 640×480
 
@@ -724,7 +733,8 @@ def test_a_weak_place_of_the_search_needs_the_next_frame(taught: Taught, repeat_
         rp.close()
 
 
-def test_a_weak_place_is_held_over_a_frame_whose_search_finds_nothing(taught: Taught, repeat_features):
+def test_a_weak_place_is_held_over_a_frame_whose_search_finds_nothing(taught: Taught, repeat_features,
+                                                                       black_features):
     """At dusk every other frame's search may find too little. A weak place held at frame 12 is found again by
     frame 14's search after a black frame 13 (no landmarks) when search_hold_frames is 2 or more, with the two VO
     steps between them; with 1 (the next frame only) frame 14's place is held anew instead."""
@@ -732,16 +742,13 @@ def test_a_weak_place_is_held_over_a_frame_whose_search_finds_nothing(taught: Ta
 
     camera = StereoCamera.from_projections(P_LEFT, P_RIGHT)
     feats = repeat_features["teach"]
-    front = SourceFrontEnd(("grey", "fv", "fr"), StereoConfig(), ColorConstantConfig())
-    black = front.process(np.zeros((H, W, 3), np.uint8), np.zeros((H, W, 3), np.uint8), P_LEFT, P_RIGHT)
-    front.close()
     truth = [pose(REPEAT_X, z, REPEAT_YAW_DEG) for z in REPEAT_Z]
     steps = [VoResult(np.linalg.inv(truth[i - 1]) @ truth[i], True, 50, 50, True) for i in (13, 14)]
     for hold, expected in ((3, True), (2, True), (1, False)):
         rp = RepeatPipeline(taught.teach_map, _repeat_config("fused", search_accept_inliers=10**6,
                                                              search_hold_frames=hold))
         a = rp._localize_step(0, VoResult(np.eye(4), True, 0, 0, False, first=True), feats[12], camera, None)
-        dark = rp._localize_step(STAMP_STEP_NS, steps[0], black, camera, None)
+        dark = rp._localize_step(STAMP_STEP_NS, steps[0], black_features, camera, None)
         b = rp._localize_step(2 * STAMP_STEP_NS, steps[1], feats[14], camera, None)
         assert not a.localized and not dark.localized and b.relocalized == expected, (hold, b)
         assert rp.held_places == (1 if expected else 2)
@@ -843,7 +850,7 @@ def test_vo_rejects_a_step_whose_translation_jumps_from_the_last_one(taught: Tau
     assert abs(results[-1].T_prev_cur[2, 3] - 0.6) < 0.03
 
 
-def test_a_dark_stretch_follows_the_taught_path_at_the_last_speed(taught: Taught, repeat_features):
+def test_a_dark_stretch_follows_the_taught_path_at_the_last_speed(taught: Taught, repeat_features, black_features):
     """Four localized frames, then four black ones (no landmarks) whose VO fails with a wrong constant-velocity
     prediction (0.5 m sideways): with follow_path_on_vo_failure the prior moves along the taught path at the
     localized frames' 0.5 m per frame and ends within 0.1 m of the truth; repeating the VO prediction ends > 1 m
@@ -851,9 +858,6 @@ def test_a_dark_stretch_follows_the_taught_path_at_the_last_speed(taught: Taught
     from lightfast.vtr.visual_odometry import VoResult
 
     camera = StereoCamera.from_projections(P_LEFT, P_RIGHT)
-    front = SourceFrontEnd(("grey", "fv", "fr"), StereoConfig(), ColorConstantConfig())
-    black = front.process(np.zeros((H, W, 3), np.uint8), np.zeros((H, W, 3), np.uint8), P_LEFT, P_RIGHT)
-    front.close()
     truth = [pose(REPEAT_X, z, REPEAT_YAW_DEG) for z in REPEAT_Z]
     wrong = np.eye(4)
     wrong[:3, 3] = [0.5, 0.0, 0.0]
@@ -867,8 +871,8 @@ def test_a_dark_stretch_follows_the_taught_path_at_the_last_speed(taught: Taught
                 vo = VoResult(np.linalg.inv(truth[i - 1]) @ truth[i], True, 100, 100, True)
             else:
                 vo = VoResult(wrong, False, 0, 0, False)
-            r = rp._localize_step(i * STAMP_STEP_NS, vo, repeat_features["teach"][i] if i < 8 else black, camera,
-                                  None)
+            frame = repeat_features["teach"][i] if i < 8 else black_features
+            r = rp._localize_step(i * STAMP_STEP_NS, vo, frame, camera, None)
             assert r.localized == (i < 8), (follow, i)
         true_kf_cam = np.linalg.inv(taught.kf_pose[r.keyframe_index]) @ truth[11]
         error_m = float(np.linalg.norm(r.T_kf_cam[:3, 3] - true_kf_cam[:3, 3]))
