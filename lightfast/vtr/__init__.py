@@ -52,7 +52,13 @@ from lightfast.vtr.landmark_matching import match_landmarks
 from lightfast.vtr.localization import Localization, MapLocalizer
 from lightfast.vtr.localizer_config import PHASES, VtrLocalizerConfig
 from lightfast.vtr.map_store import MAP_FORMAT, MAP_VERSION, Edge, Keyframe, Landmarks, MapStore, MapWriter, TeachMap
-from lightfast.vtr.pose_estimation import PoseEstimate, StereoCamera, estimate_pose_stereo, refine_pose_stereo
+from lightfast.vtr.pose_estimation import (
+    PoseEstimate,
+    PriorSupport,
+    StereoCamera,
+    estimate_pose_stereo,
+    refine_pose_stereo,
+)
 from lightfast.vtr.repeat import RepeatPipeline, RepeatResult
 from lightfast.vtr.repeat_config import MODES, RepeatConfig
 from lightfast.vtr.stereo_config import FEATURE_CHOICE, FEATURE_TYPES, StereoConfig
@@ -86,6 +92,7 @@ __all__ = [
     "MapVersionError",
     "MapWriter",
     "PoseEstimate",
+    "PriorSupport",
     "RepeatConfig",
     "RepeatPipeline",
     "RepeatResult",

@@ -41,7 +41,7 @@ from lightfast.vtr.features import StereoFeatures
 from lightfast.vtr.landmark_matching import match_landmarks, max_descriptor_distance
 from lightfast.vtr.map_search import search_map
 from lightfast.vtr.map_store import TeachMap
-from lightfast.vtr.pose_estimation import StereoCamera, estimate_pose_stereo
+from lightfast.vtr.pose_estimation import PriorSupport, StereoCamera, estimate_pose_stereo
 from lightfast.vtr.repeat_config import RepeatConfig
 
 __all__ = ["FeatureSupplier", "Localization", "MapLocalizer", "PriorGate"]
@@ -210,6 +210,9 @@ class MapLocalizer:
             quality=np.concatenate(dists),
             ordered_fraction=c.ransac_ordered_fraction if T_ref_cam_prior is None else 0.0,  # unguided only
             min_iterations=c.ransac_min_iterations, refine_top=c.ransac_refine_top,
+            prior=None if T_ref_cam_prior is None or c.prior_consensus_sigmas <= 0 else PriorSupport(
+                T_ref_cam_prior, c.prior_consensus_sigmas, gate.position_cov if gate is not None else None,
+                gate.sigmas if gate is not None else 0.0, c.prior_consensus_min_inliers),
         )
         lab = np.concatenate(labels)
         counts = np.bincount(lab[est.inliers], minlength=len(sources))

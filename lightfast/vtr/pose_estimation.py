@@ -39,6 +39,7 @@ from lightfast.vtr.stereo_front_end import check_stereo_pair
 
 __all__ = [
     "PoseEstimate",
+    "PriorSupport",
     "StereoCamera",
     "estimate_pose_stereo",
     "project",
@@ -98,6 +99,36 @@ class PoseEstimate:
         if not np.all(np.isfinite(c)):
             return math.inf
         return float(math.sqrt(max(0.0, float(np.linalg.eigvalsh(0.5 * (c + c.T))[-1]))))
+
+
+@dataclass(frozen=True)
+class PriorSupport:
+    """A prior pose ``T_ref_cur`` whose own consensus (the inliers at the prior, refined like the sampled ones) is
+    kept over the best sampled consensus when it has ``min_inliers`` and that one has at most ``margin_sigmas`` · √n
+    more inliers (n: its count) and lies beyond ``sigmas`` standard deviations of the prior's position
+    (``position_cov``, 3×3 in the reference frame; None: the prior is certain). Where the inliers cannot tell poses
+    apart — a valley of poses along the viewing direction of far points, where counts ~1 m apart differ by less than
+    their sampling noise — and the prior can, the pose it supports wins, not whichever one the sampling found
+    (maximum a posteriori: equal likelihoods, the prior decides)."""
+
+    T_ref_cur: NDArray[np.float64]
+    margin_sigmas: float = 1.0
+    position_cov: NDArray[np.float64] | None = None
+    sigmas: float = 3.0
+    min_inliers: int = 0
+
+    def keeps(self, count: int, other_count: int = 0, T_ref_other: NDArray[np.float64] | None = None) -> bool:
+        """Whether the prior's consensus of ``count`` inliers wins over another of ``other_count`` at
+        ``T_ref_other`` (None: no other)."""
+        if count < self.min_inliers or count < other_count - self.margin_sigmas * math.sqrt(other_count):
+            return False
+        if T_ref_other is None:
+            return True
+        cov = self.position_cov
+        if cov is None or not np.all(np.isfinite(cov)) or np.linalg.cond(cov) > 1e12:
+            return True
+        offset = T_ref_other[:3, 3] - self.T_ref_cur[:3, 3]
+        return float(offset @ np.linalg.solve(cov, offset)) > self.sigmas**2
 
 
 def _invert(T: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -392,6 +423,7 @@ def estimate_pose_stereo(
     ordered_fraction: float = 0.0,
     refine_top: int = 1,
     min_iterations: int = 0,
+    prior: PriorSupport | None = None,
 ) -> PoseEstimate:
     """Pose of the current camera in the reference frame from 3-D reference points and their current stereo
     measurements (left pixel, effective disparity = fb / Z): 3-point 3-D–3-D RANSAC scored by the stereo
@@ -411,6 +443,7 @@ def estimate_pose_stereo(
     * ``refine_top`` > 1: the best ``refine_top`` hypotheses with distinct inlier sets are each refined (inliers
       re-selected, LM, until stable); the one with the most inliers afterwards (then the lowest RMS) wins. The
       most-inliers hypothesis often rests on far points and misses the near ones a slightly worse one holds.
+    * ``prior``: the prior's own consensus may win over the sampled ones (:class:`PriorSupport`).
 
     ``success`` needs at least ``max(min_inliers, 3)`` inliers. A failed estimate has ``T_ref_cur`` = identity
     and an empty inlier mask. Deterministic for a given ``seed``. Never raises for degenerate data (too few
@@ -482,11 +515,13 @@ def estimate_pose_stereo(
             w = best_count / m
             p_good = w**3
             needed = 0.0 if p_good >= 1.0 else (log_fail / math.log(1.0 - p_good) if p_good > 0 else math.inf)
-    if best_T is None or best_count < need:
+    if (best_T is None or best_count < need) and prior is None:
         return failed
     best: tuple[int, float, NDArray[np.float64], NDArray[np.bool_], NDArray[np.float64]] | None = None
     seen: list[NDArray[np.bool_]] = []
-    for T_cur_ref in [best_T] if refine_top <= 1 else list(top_Ts[top_counts >= need]):
+    starts = [] if best_T is None or best_count < need else \
+        [best_T] if refine_top <= 1 else list(top_Ts[top_counts >= need])
+    for T_cur_ref in starts:
         r, _, front = _stereo_residuals(T_cur_ref, P, meas, K, fb)
         first = ok & front & (np.sum(r * r, axis=1) <= thr2)
         if any(np.array_equal(first, m) for m in seen):
@@ -495,6 +530,12 @@ def estimate_pose_stereo(
         refined = _refine_consensus(first, P, meas, camera, thr2, ok, _invert(T_cur_ref))
         if refined is not None and (best is None or (refined[0], -refined[1]) > (best[0], -best[1])):
             best = refined
+    if prior is not None:
+        r, _, front = _stereo_residuals(_invert(prior.T_ref_cur), P, meas, K, fb)
+        supported = _refine_consensus(ok & front & (np.sum(r * r, axis=1) <= thr2), P, meas, camera, thr2, ok,
+                                      prior.T_ref_cur)
+        if supported is not None and prior.keeps(supported[0], *((best[0], best[2]) if best else ())):
+            best = supported
     if best is None:
         return failed
     count, rms, T_ref_cur, inliers, H = best

@@ -86,6 +86,18 @@ class RepeatConfig(Config):
         "among random greyscale matches under changed lighting (McManus mode then trusts them): off by default.",
         min=1, max=1000,
     )
+    prior_consensus_sigmas: float = param(
+        1.0, description="With a prior, the prior's own consensus (inliers at the VO prior, refined) is kept unless "
+        "the RANSAC's best has more than this many sqrt(n) inliers more (n: its count) or lies within the gate's "
+        "sigmas of the prior's position uncertainty: where the counts cannot tell poses apart (far points only: poses "
+        "~1 m apart along their viewing direction differ by a few inliers), the prior decides. 0: the most inliers "
+        "win.", min=0.0,
+    )
+    prior_consensus_min_inliers: int = param(
+        30, description="Fewest inliers of the prior's own consensus for prior_consensus_sigmas to keep it (the "
+        "strength confirm_beyond_gate_inliers asks for): with a dozen inliers under low sun the counts say little "
+        "and a prior left off by a weak localization would hold itself.", min=0,
+    )
     max_position_std_m: float = param(
         0.5, description="A localization also needs its camera position constrained to this standard deviation "
         "(nominal 1 px noise), m: rejects poses resting on far points only.", min=0.0,

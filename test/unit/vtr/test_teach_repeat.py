@@ -43,6 +43,7 @@ from lightfast.vtr import (
     MapNotFoundError,
     MapStore,
     MapVersionError,
+    PriorSupport,
     RepeatConfig,
     RepeatPipeline,
     RepeatResult,
@@ -361,6 +362,35 @@ def test_near_first_sampling_and_refined_hypotheses_fix_the_translation_far_poin
     plain, vo = np.array(errors["plain"]), np.array(errors["vo"])
     assert np.sum(plain > 0.1) >= 4 and np.sum(vo > 0.05) == 0, (plain.round(3), vo.round(3))
     assert np.median(vo) < 0.5 * np.median(plain)
+
+
+def test_a_prior_keeps_its_consensus_unless_another_has_clearly_more_inliers():
+    """Two consensus sets 1 m apart along the optical axis (as far points leave a valley of poses whose inlier
+    counts differ by their sampling noise): without a prior the larger one wins; with a prior at the smaller one
+    that one is kept while the larger has fewer than √n more inliers, not when it has twice as many, nor when the
+    larger lies within the prior's own uncertainty or the prior's consensus is below its minimum."""
+    rng = np.random.default_rng(11)
+    camera = StereoCamera.from_projections(P_LEFT, P_RIGHT)
+    T_a, T_b = pose(0.1, 0.3, 1.0), pose(0.1, 1.3, 1.0)
+
+    def group(T_ref_cur: np.ndarray, n: int):
+        P_ref = np.c_[rng.uniform(-3, 3, n), rng.uniform(-1.5, 1, n), rng.uniform(3, 12, n)]
+        return (P_ref, *_stereo_measurements(P_ref, T_ref_cur, rng, 0.3))
+
+    prior = T_a.copy()
+    prior[:3, 3] += [0.05, -0.03, 0.1]
+    for n_b, kept in ((44, True), (80, False)):
+        P, uv, d = (np.concatenate(x) for x in zip(group(T_a, 40), group(T_b, n_b), strict=True))
+        runs = {"none": {}, "prior": {"prior": PriorSupport(prior, 1.0)},
+                "uncertain prior": {"prior": PriorSupport(prior, 1.0, np.eye(3), 3.0)},  # 1 m std: cannot tell
+                "weak": {"prior": PriorSupport(prior, 1.0, min_inliers=60)},
+                "off": {"prior": PriorSupport(prior, 0.0)}}
+        for name, opts in runs.items():
+            est = estimate_pose_stereo(P, uv, d, camera, threshold_px=3.0, min_inliers=6, **opts)
+            want = T_a if name == "prior" and kept else T_b
+            assert est.success and np.linalg.norm(est.T_ref_cur[:3, 3] - want[:3, 3]) < 0.05, (n_b, name)
+            group_in = est.inliers[:40] if want is T_a else est.inliers[40:]
+            assert group_in.mean() > 0.95, (n_b, name, group_in.mean())
 
 
 def _few_correct_matches(rng: np.random.Generator, T_ref_cur: np.ndarray, n: int, n_in: int):
