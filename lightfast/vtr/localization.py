@@ -43,6 +43,7 @@ from lightfast.vtr.map_search import search_map
 from lightfast.vtr.map_store import TeachMap
 from lightfast.vtr.pose_estimation import PriorSupport, StereoCamera, estimate_pose_stereo
 from lightfast.vtr.repeat_config import RepeatConfig
+from lightfast.vtr.vo_prior import mahalanobis_sq
 
 __all__ = ["FeatureSupplier", "Localization", "MapLocalizer", "PriorGate"]
 
@@ -91,15 +92,10 @@ class PriorGate:
         """Whether a localization ``offset_m`` (3,) from the prior's position, with ``inliers``, passes."""
         if float(np.linalg.norm(offset_m)) <= self.radius_m:
             return True
-        if self.position_cov is None or self.sigmas <= 0.0 or not np.all(np.isfinite(self.position_cov)):
+        if self.sigmas <= 0.0 or (inliers is not None and inliers < self.min_inliers_beyond_radius):
             return False
-        if inliers is not None and inliers < self.min_inliers_beyond_radius:
-            return False
-        try:
-            d2 = float(offset_m @ np.linalg.solve(self.position_cov, offset_m))
-        except np.linalg.LinAlgError:
-            return False
-        return d2 <= self.sigmas**2
+        d2 = mahalanobis_sq(offset_m, self.position_cov)
+        return d2 is not None and d2 <= self.sigmas**2
 
 
 @dataclass(frozen=True)

@@ -36,6 +36,7 @@ from numpy.typing import ArrayLike, NDArray
 from lightfast.vtr.errors import VtrInputError
 from lightfast.vtr.features import StereoFeatures
 from lightfast.vtr.stereo_front_end import check_stereo_pair
+from lightfast.vtr.vo_prior import mahalanobis_sq
 
 __all__ = [
     "PoseEstimate",
@@ -124,11 +125,8 @@ class PriorSupport:
             return False
         if T_ref_other is None:
             return True
-        cov = self.position_cov
-        if cov is None or not np.all(np.isfinite(cov)) or np.linalg.cond(cov) > 1e12:
-            return True
-        offset = T_ref_other[:3, 3] - self.T_ref_cur[:3, 3]
-        return float(offset @ np.linalg.solve(cov, offset)) > self.sigmas**2
+        d2 = mahalanobis_sq(T_ref_other[:3, 3] - self.T_ref_cur[:3, 3], self.position_cov)
+        return d2 is None or d2 > self.sigmas**2
 
 
 def _invert(T: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -515,12 +513,13 @@ def estimate_pose_stereo(
             w = best_count / m
             p_good = w**3
             needed = 0.0 if p_good >= 1.0 else (log_fail / math.log(1.0 - p_good) if p_good > 0 else math.inf)
-    if (best_T is None or best_count < need) and prior is None:
+    starts: list[NDArray[np.float64]] = []  # the sampled hypotheses to refine
+    if best_T is not None and best_count >= need:
+        starts = [best_T] if refine_top <= 1 else list(top_Ts[top_counts >= need])
+    elif prior is None:
         return failed
     best: tuple[int, float, NDArray[np.float64], NDArray[np.bool_], NDArray[np.float64]] | None = None
     seen: list[NDArray[np.bool_]] = []
-    starts = [] if best_T is None or best_count < need else \
-        [best_T] if refine_top <= 1 else list(top_Ts[top_counts >= need])
     for T_cur_ref in starts:
         r, _, front = _stereo_residuals(T_cur_ref, P, meas, K, fb)
         first = ok & front & (np.sum(r * r, axis=1) <= thr2)

@@ -21,7 +21,7 @@ from numpy.typing import NDArray
 
 from lightfast.geometry import hat, inverse, se3_exp, se3_log
 
-__all__ = ["add_keyframe_noise", "adjoint", "fuse", "propagate_covariance"]
+__all__ = ["add_keyframe_noise", "adjoint", "fuse", "mahalanobis_sq", "propagate_covariance"]
 
 Array = NDArray[np.float64]
 
@@ -50,6 +50,17 @@ def propagate_covariance(P: Array, T_prev_cur: Array, step_m: float, position_no
     if step_covariance is not None and np.all(np.isfinite(step_covariance)):
         Q = Q + 0.5 * (step_covariance + step_covariance.T)
     return A @ P @ A.T + Q
+
+
+def mahalanobis_sq(offset: Array, cov: Array | None) -> float | None:
+    """Squared Mahalanobis distance ``offsetᵀ cov⁻¹ offset``; None without a usable covariance (missing, not finite
+    or singular)."""
+    if cov is None or not np.all(np.isfinite(cov)):
+        return None
+    try:
+        return float(offset @ np.linalg.solve(cov, offset))
+    except np.linalg.LinAlgError:
+        return None
 
 
 def add_keyframe_noise(P: Array, position_std_m: float, rotation_std_deg: float) -> Array:
