@@ -8,6 +8,14 @@ mode's image sources, PROSAC-ordered RANSAC hypotheses, no prior gate); the loca
 farther than ``search_distinct_m`` along the taught path, so the caller can refuse a place that a look-alike nearly
 matches. (Windows overlap: a window centred a few keyframes away often localizes the camera at the same place with
 its shared keyframes; that is the same place, not a look-alike.)
+
+**Verification by guided matching** (``search_verify_places`` > 0; not in the paper — ORB-SLAM's relocalization,
+Mur-Artal et al. 2015 §V-E, "search by projection" before accepting): unguided matching keeps only landmarks whose
+descriptor is the frame's nearest, so under a changed sun a right place gathers few inliers. The best localizations
+of the most distinct places (one per ``search_distinct_m`` along the path, most inliers first) are localized again
+against the window of ``window_radius`` around them, matched by projection from their own pose (as a windowed
+localization with a VO prior); a right place gains the matches its pose predicts, a look-alike's pose predicts few.
+Winner and runner-up are then chosen among the verified places (a verification that fails keeps the unguided one).
 Every keyframe lies in up to 2r + 1 windows: during the search each keyframe's landmarks are matched
 to the frame once per source and the matches are combined per window
 (:meth:`~lightfast.vtr.localization.MapLocalizer.unguided_cache`) — exactly the matches of matching each window at
@@ -39,7 +47,7 @@ def search_map(localizer: MapLocalizer, features: Mapping[str, StereoFeatures], 
     """Whole-map search (§IV-C): every keyframe (with ``search_window_radius`` neighbours on each side),
     unguided; the most inliers win (first on ties); ``runner_up_inliers``: the best distinct place's."""
     best: Localization | None = None
-    found: list[Localization] = []
+    found: list[Localization] = []  # every successful window
     r, n = localizer.config.search_window_radius, len(localizer.map)
     # every keyframe is in up to 2r + 1 windows: match its landmarks once (NearestMatches), combine per window
     with localizer.unguided_cache():
@@ -52,10 +60,41 @@ def search_map(localizer: MapLocalizer, features: Mapping[str, StereoFeatures], 
             if best is None or (loc.success and (not best.success or loc.inliers > best.inliers)):
                 best = loc
     assert best is not None
-    if best.success:
-        along = localizer.map.along_path_m
-        at = along(best.ref_index, best.T_ref_cam)
-        far = [f.inliers for f in found
-               if abs(along(f.ref_index, f.T_ref_cam) - at) > localizer.config.search_distinct_m]
-        best = replace(best, runner_up_inliers=max(far, default=0))
-    return best
+    if not best.success:
+        return best
+    found.sort(key=lambda f: -f.inliers)  # stable: first on ties as above
+    places = _distinct(localizer, found, localizer.config.search_verify_places)
+    verified = [_verified(localizer, features, camera, p, more) for p in places]
+    best = max(verified, key=lambda f: f.inliers) if verified else best
+    along = localizer.map.along_path_m
+    at = along(best.ref_index, best.T_ref_cam)
+    rest = [f for f in found if all(f is not p for p in places)]  # a verified place replaces its unguided one
+    rivals = [f.inliers for f in (*verified, *rest)
+              if abs(along(f.ref_index, f.T_ref_cam) - at) > localizer.config.search_distinct_m]
+    return replace(best, runner_up_inliers=max(rivals, default=0))
+
+
+def _distinct(localizer: MapLocalizer, found: list[Localization], count: int) -> list[Localization]:
+    """The first ``count`` of ``found`` (most inliers first) farther than ``search_distinct_m`` along the path from
+    every one chosen before."""
+    along = localizer.map.along_path_m
+    chosen: list[tuple[Localization, float]] = []
+    for f in found:
+        if len(chosen) >= count:
+            break
+        a = along(f.ref_index, f.T_ref_cam)
+        if all(abs(a - b) > localizer.config.search_distinct_m for _, b in chosen):
+            chosen.append((f, a))
+    return [f for f, _ in chosen]
+
+
+def _verified(localizer: MapLocalizer, features: Mapping[str, StereoFeatures], camera: StereoCamera,
+              place: Localization, more: FeatureSupplier | None) -> Localization:
+    """``place`` localized again by guided matching from its own pose (module docstring); ``place`` itself if
+    that fails or finds fewer inliers."""
+    from lightfast.vtr.localization import PriorGate  # run time: localization imports this module
+
+    k = place.ref_index
+    loc = localizer.localize(features, camera, k, localizer.map.window(k, localizer.config.window_radius),
+                             place.T_ref_cam, more, PriorGate(localizer.config.search_distinct_m))
+    return loc if loc.success and loc.inliers >= place.inliers else place

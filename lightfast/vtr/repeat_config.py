@@ -180,11 +180,17 @@ class RepeatConfig(Config):
         5.0, description="Localizations of the whole-map search that put the camera this far apart along the "
         "taught path count as different places for search_margin, m.", min=0.0,
     )
+    search_verify_places: int = param(
+        3, description="The whole-map search localizes the best localizations of this many distinct places "
+        "(search_distinct_m apart) again by guided matching from their own pose before choosing among them "
+        "(0: off; lightfast.vtr.map_search).", min=0,
+    )
     search_accept_inliers: int = param(
-        40, description="A place of the whole-map search with at least this many inliers is accepted at once; a "
-        "weaker one (search_min_inliers up to this) only when a later search (search_hold_frames) finds it again, "
-        "where the VO motion between the frames puts it (within search_agree_m): a look-alike seldom wins twice. On "
-        "the development routes the wrong places accepted had 12-19 inliers, the right ones 30-800.", min=0,
+        30, description="A place of the whole-map search with at least this many inliers (after verification, "
+        "search_verify_places) is accepted at once; a weaker one (search_min_inliers up to this) only when a later "
+        "search (search_hold_frames) finds it again, where the VO motion between the frames puts it (within "
+        "search_agree_m): a look-alike seldom wins twice. On the development routes wrong places had at most 19 "
+        "verified inliers (docs/vtr.md).", min=0,
     )
     search_hold_frames: int = param(
         3, description="A weak place of the whole-map search (below search_accept_inliers) is held this many frames, "

@@ -622,22 +622,26 @@ def test_failure_after_distance_on_vo_then_whole_map_search(taught: Taught, repe
 
 @pytest.mark.parametrize("radius", [0, 2])
 def test_whole_map_search_with_keyframe_windows(taught: Taught, repeat_features, radius: int):
-    """The kidnapped search tries every keyframe with its ``search_window_radius`` neighbours and relocalizes."""
+    """The kidnapped search tries every keyframe with its ``search_window_radius`` neighbours, unguided, then
+    verifies distinct places by guided matching in ``window_radius`` windows, and relocalizes."""
     from lightfast.vtr.localization import MapLocalizer
 
-    rp = RepeatPipeline(taught.teach_map, _repeat_config("fused", search_window_radius=radius))
-    windows = []
+    config = _repeat_config("fused", search_window_radius=radius)
+    rp = RepeatPipeline(taught.teach_map, config)
+    windows, guided = [], []
     localize = MapLocalizer.localize
 
-    def spy(self, features, camera, ref, window, *args, **kwargs):
-        windows.append(tuple(window))
-        return localize(self, features, camera, ref, window, *args, **kwargs)
+    def spy(self, features, camera, ref, window, prior, *args, **kwargs):
+        (windows if prior is None else guided).append((ref, tuple(window)))
+        return localize(self, features, camera, ref, window, prior, *args, **kwargs)
 
     n = len(taught.teach_map)
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(MapLocalizer, "localize", spy)
         first = rp.step_features(0, repeat_features["changed"][12], P_LEFT, P_RIGHT)
-    assert windows == [tuple(range(max(0, k - radius), min(n, k + radius + 1))) for k in range(n)]
+    assert [w for _, w in windows] == [tuple(range(max(0, k - radius), min(n, k + radius + 1))) for k in range(n)]
+    assert 1 <= len(guided) <= config.search_verify_places
+    assert all(w == tuple(taught.teach_map.window(k, config.window_radius)) for k, w in guided)
     assert first.searched_map and first.relocalized and first.localized
     kf_z = taught.kf_pose[first.keyframe_index][2, 3]
     assert abs(kf_z + first.T_kf_cam[2, 3] - REPEAT_Z[12]) < 0.1
@@ -649,7 +653,8 @@ def test_whole_map_search_matches_each_keyframe_once_with_the_windows_matches(ta
     import lightfast.vtr.descriptor_matching as stereo_module
     from lightfast.vtr.localization import MapLocalizer
 
-    localizer = MapLocalizer(taught.teach_map, _repeat_config("fused", search_window_radius=2))
+    # without the guided verification of the places found (its matching is not the search's)
+    localizer = MapLocalizer(taught.teach_map, _repeat_config("fused", search_window_radius=2, search_verify_places=0))
     features = repeat_features["changed"][12]
     camera = StereoCamera.from_projections(P_LEFT, P_RIGHT)
     seen, distance_calls = [], []
