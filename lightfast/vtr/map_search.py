@@ -11,16 +11,12 @@ its shared keyframes; that is the same place, not a look-alike.)
 
 **Verification by guided matching** (``search_verify_places`` > 0; not in the paper — ORB-SLAM's relocalization,
 Mur-Artal et al. 2015 §V-E, "search by projection" before accepting): unguided matching keeps only landmarks whose
-descriptor is the frame's nearest, so under a changed sun a right place gathers few inliers. The best localizations
-of the most distinct places (one per ``search_distinct_m`` along the path, most inliers first) are localized again
-against the window of ``window_radius`` around them, matched by projection from their own pose (as a windowed
-localization with a VO prior); a right place gains the matches its pose predicts, a look-alike's pose predicts few.
-Winner and runner-up are then chosen among the verified places (a verification that fails keeps the unguided one).
-Every keyframe lies in up to 2r + 1 windows: during the search each keyframe's landmarks are matched
-to the frame once per source and the matches are combined per window
-(:meth:`~lightfast.vtr.localization.MapLocalizer.unguided_cache`) — exactly the matches of matching each window at
-once. In ``mcmanus`` mode the colour-constant features are computed once, at the first keyframe where greyscale
-fails, and reused for the later keyframes.
+descriptor is the frame's nearest, so under a changed sun a right place gathers few inliers. The
+``search_verify_places`` localizations with the most inliers, and the best one of a place distinct from the first,
+are localized again against the window of ``window_radius`` around them, matched by projection from their own pose
+(as a windowed localization with a VO prior): a right place gains the matches its pose predicts, a look-alike's
+pose predicts few. Winner and runner-up are chosen among the verified localizations and the unverified rest (a
+verification that fails or finds fewer inliers keeps the unguided localization).
 
 Inputs: the current frame's :class:`~lightfast.vtr.features.StereoFeatures` per image source and the
 :class:`~lightfast.vtr.pose_estimation.StereoCamera`. Output: the best
@@ -63,29 +59,19 @@ def search_map(localizer: MapLocalizer, features: Mapping[str, StereoFeatures], 
     if not best.success:
         return best
     found.sort(key=lambda f: -f.inliers)  # stable: first on ties as above
-    places = _distinct(localizer, found, localizer.config.search_verify_places)
-    verified = [_verified(localizer, features, camera, p, more) for p in places]
+    along = localizer.map.along_path_m
+    distinct_m = localizer.config.search_distinct_m
+    top = found[:localizer.config.search_verify_places]
+    if top:  # and the best place distinct from the best one, so the margin compares verified with verified
+        at = along(top[0].ref_index, top[0].T_ref_cam)
+        top += [f for f in found if abs(along(f.ref_index, f.T_ref_cam) - at) > distinct_m and all(
+            f is not t for t in top)][:1]
+    verified = [_verified(localizer, features, camera, f, more) for f in top]
     best = max(verified, key=lambda f: f.inliers) if verified else best
-    along = localizer.map.along_path_m
     at = along(best.ref_index, best.T_ref_cam)
-    rest = [f for f in found if all(f is not p for p in places)]  # a verified place replaces its unguided one
-    rivals = [f.inliers for f in (*verified, *rest)
-              if abs(along(f.ref_index, f.T_ref_cam) - at) > localizer.config.search_distinct_m]
+    rest = [f for f in found if all(f is not t for t in top)]  # a verified localization replaces its unguided one
+    rivals = [f.inliers for f in (*verified, *rest) if abs(along(f.ref_index, f.T_ref_cam) - at) > distinct_m]
     return replace(best, runner_up_inliers=max(rivals, default=0))
-
-
-def _distinct(localizer: MapLocalizer, found: list[Localization], count: int) -> list[Localization]:
-    """The first ``count`` of ``found`` (most inliers first) farther than ``search_distinct_m`` along the path from
-    every one chosen before."""
-    along = localizer.map.along_path_m
-    chosen: list[tuple[Localization, float]] = []
-    for f in found:
-        if len(chosen) >= count:
-            break
-        a = along(f.ref_index, f.T_ref_cam)
-        if all(abs(a - b) > localizer.config.search_distinct_m for _, b in chosen):
-            chosen.append((f, a))
-    return [f for f, _ in chosen]
 
 
 def _verified(localizer: MapLocalizer, features: Mapping[str, StereoFeatures], camera: StereoCamera,

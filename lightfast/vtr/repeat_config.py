@@ -181,9 +181,9 @@ class RepeatConfig(Config):
         "taught path count as different places for search_margin, m.", min=0.0,
     )
     search_verify_places: int = param(
-        3, description="The whole-map search localizes the best localizations of this many distinct places "
-        "(search_distinct_m apart) again by guided matching from their own pose before choosing among them "
-        "(0: off; lightfast.vtr.map_search).", min=0,
+        3, description="The whole-map search localizes its this many best localizations, and the best one of a "
+        "place search_distinct_m from the first, again by guided matching from their own pose before choosing "
+        "among them (0: off; lightfast.vtr.map_search).", min=0,
     )
     search_accept_inliers: int = param(
         30, description="A place of the whole-map search with at least this many inliers (after verification, "

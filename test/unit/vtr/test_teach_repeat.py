@@ -640,7 +640,7 @@ def test_whole_map_search_with_keyframe_windows(taught: Taught, repeat_features,
         mp.setattr(MapLocalizer, "localize", spy)
         first = rp.step_features(0, repeat_features["changed"][12], P_LEFT, P_RIGHT)
     assert [w for _, w in windows] == [tuple(range(max(0, k - radius), min(n, k + radius + 1))) for k in range(n)]
-    assert 1 <= len(guided) <= config.search_verify_places
+    assert 1 <= len(guided) <= config.search_verify_places + 1
     assert all(w == tuple(taught.teach_map.window(k, config.window_radius)) for k, w in guided)
     assert first.searched_map and first.relocalized and first.localized
     kf_z = taught.kf_pose[first.keyframe_index][2, 3]
@@ -1054,3 +1054,23 @@ def test_teach_refuses_a_camera_change(taught: Taught, tmp_path: Path):
     teach.abort()
     with pytest.raises(VtrError, match="no frames"):
         TeachPipeline(tmp_path / "empty").finish()
+
+
+def test_the_search_verifies_its_place_by_guided_matching(taught: Taught, repeat_features):
+    """Unguided matching keeps a landmark only when its descriptor is the frame's nearest; under changed lighting
+    the right place gathers few inliers that way. Verified by guided matching from its own pose
+    (search_verify_places), the same place has more inliers and stays right; without verification the search
+    returns the unguided localization."""
+    from lightfast.vtr.localization import MapLocalizer
+
+    camera = StereoCamera.from_projections(P_LEFT, P_RIGHT)
+    features = repeat_features["changed"][12]
+    places = {}
+    for verify in (0, 3):
+        localizer = MapLocalizer(taught.teach_map, _repeat_config("fused", search_verify_places=verify))
+        places[verify] = localizer.search(features, camera)
+    tm = taught.teach_map
+    for loc in places.values():
+        assert loc.success
+        assert abs(tm.along_path_m(loc.ref_index, loc.T_ref_cam) - (REPEAT_Z[12] - TEACH_Z[0])) < 0.1
+    assert places[3].inliers > places[0].inliers, (places[3].inliers, places[0].inliers)
