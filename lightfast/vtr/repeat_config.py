@@ -172,8 +172,9 @@ class RepeatConfig(Config):
         "localization far more often (twice min_inliers).", min=4,
     )
     search_margin: float = param(
-        1.5, description="... and with at least this many times the inliers of the best place farther than "
-        "search_distinct_m along the path (a ratio test between places: a repetitive route has look-alikes).",
+        2.0, description="... and with at least this many times the inliers of the best place farther than "
+        "search_distinct_m along the path (a ratio test between places: a repetitive route has look-alikes; the "
+        "verification raises a look-alike's inliers too, docs/vtr.md).",
         min=1.0,
     )
     search_distinct_m: float = param(
