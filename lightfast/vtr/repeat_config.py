@@ -187,11 +187,11 @@ class RepeatConfig(Config):
         "among them (0: off; lightfast.vtr.map_search).", min=0,
     )
     search_accept_inliers: int = param(
-        30, description="A place of the whole-map search with at least this many inliers (after verification, "
+        40, description="A place of the whole-map search with at least this many inliers (after verification, "
         "search_verify_places) is accepted at once; a weaker one (search_min_inliers up to this) only when a later "
         "search (search_hold_frames) finds it again, where the VO motion between the frames puts it (within "
-        "search_agree_m): a look-alike seldom wins twice. On the development routes wrong places had at most 19 "
-        "verified inliers (docs/vtr.md).", min=0,
+        "search_agree_m): a look-alike seldom wins twice. On the development routes a wrong place had 31 (grey, low "
+        "sun, 5.7 m off along the optical axis), the right ones at the repeats' starts 30-54 (docs/vtr.md).", min=0,
     )
     search_hold_frames: int = param(
         3, description="A weak place of the whole-map search (below search_accept_inliers) is held this many frames, "
