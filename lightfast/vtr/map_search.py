@@ -8,6 +8,11 @@ mode's image sources, PROSAC-ordered RANSAC hypotheses, no prior gate); the loca
 farther than ``search_distinct_m`` along the taught path, so the caller can refuse a place that a look-alike nearly
 matches. (Windows overlap: a window centred a few keyframes away often localizes the camera at the same place with
 its shared keyframes; that is the same place, not a look-alike.)
+Every keyframe lies in up to 2r + 1 windows: during the search each keyframe's landmarks are matched
+to the frame once per source and the matches are combined per window
+(:meth:`~lightfast.vtr.localization.MapLocalizer.unguided_cache`) — exactly the matches of matching each window at
+once. In ``mcmanus`` mode the colour-constant features are computed once, at the first keyframe where greyscale
+fails, and reused for the later keyframes.
 
 **Verification by guided matching** (``search_verify_places`` > 0; not in the paper — ORB-SLAM's relocalization,
 Mur-Artal et al. 2015 §V-E, "search by projection" before accepting): unguided matching keeps only landmarks whose
