@@ -182,7 +182,7 @@ class RepeatConfig(Config):
         "taught path count as different places for search_margin, m.", min=0.0,
     )
     search_verify_places: int = param(
-        3, description="The whole-map search localizes its this many best localizations, and the best one of a "
+        3, description="The whole-map search localizes this many of its best localizations, and the best one of a "
         "place search_distinct_m from the first, again by guided matching from their own pose before choosing "
         "among them (0: off; lightfast.vtr.map_search).", min=0,
     )
