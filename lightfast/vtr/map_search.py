@@ -64,18 +64,17 @@ def search_map(localizer: MapLocalizer, features: Mapping[str, StereoFeatures], 
     if not best.success:
         return best
     found.sort(key=lambda f: -f.inliers)  # stable: first on ties as above
-    along = localizer.map.along_path_m
+    path_m = localizer.map.along_path_m
     distinct_m = localizer.config.search_distinct_m
-    top = found[:localizer.config.search_verify_places]
-    if top:  # and the best place distinct from the best one, so the margin compares verified with verified
-        at = along(top[0].ref_index, top[0].T_ref_cam)
-        top += [f for f in found if abs(along(f.ref_index, f.T_ref_cam) - at) > distinct_m and all(
-            f is not t for t in top)][:1]
-    verified = [_verified(localizer, features, camera, f, more) for f in top]
+    along = [path_m(f.ref_index, f.T_ref_cam) for f in found]
+    k = min(localizer.config.search_verify_places, len(found))
+    # the k best, and the best place distinct from the first, so the margin compares verified with verified
+    chosen = list(range(k)) + [i for i in range(k, len(found)) if k and abs(along[i] - along[0]) > distinct_m][:1]
+    verified = [_verified(localizer, features, camera, found[i], more) for i in chosen]
     best = max(verified, key=lambda f: f.inliers) if verified else best
-    at = along(best.ref_index, best.T_ref_cam)
-    rest = [f for f in found if all(f is not t for t in top)]  # a verified localization replaces its unguided one
-    rivals = [f.inliers for f in (*verified, *rest) if abs(along(f.ref_index, f.T_ref_cam) - at) > distinct_m]
+    at = path_m(best.ref_index, best.T_ref_cam)
+    rivals = [f.inliers for f in verified if abs(path_m(f.ref_index, f.T_ref_cam) - at) > distinct_m]
+    rivals += [f.inliers for i, f in enumerate(found) if i not in chosen and abs(along[i] - at) > distinct_m]
     return replace(best, runner_up_inliers=max(rivals, default=0))
 
 
