@@ -19,7 +19,7 @@ keypoint once); then, by ``RepeatConfig.mode``:
 Success needs ``min_inliers`` (§IV-C: six) inliers after outlier rejection and two checks added to the paper's rule
 (six inliers alone accepted wrong poses on synthetic scenes, see ``docs/vtr.md``): a constrained camera position
 (``max_position_std_m``, from the pose covariance at a nominal 1 px noise: rejects poses resting on far points
-only) and, with a prior, a position the repeat's :class:`PriorGate` admits. Output:
+only) and, with a prior, a position the repeat's :class:`~lightfast.vtr.vo_prior.PriorGate` admits. Output:
 :class:`Localization` — the camera pose ``T_ref_cam`` in keyframe ``ref_index``'s frame (4×4; metres, REP-103
 optical axes), success, matches and inliers per source, RMS reprojection error (px), covariance. The whole-map
 search over every keyframe is :mod:`lightfast.vtr.map_search`.
@@ -27,7 +27,6 @@ search over every keyframe is :mod:`lightfast.vtr.map_search`.
 from __future__ import annotations
 
 import logging
-import math
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
@@ -43,9 +42,9 @@ from lightfast.vtr.map_search import search_map
 from lightfast.vtr.map_store import TeachMap
 from lightfast.vtr.pose_estimation import PriorSupport, StereoCamera, estimate_pose_stereo
 from lightfast.vtr.repeat_config import RepeatConfig
-from lightfast.vtr.vo_prior import mahalanobis_sq
+from lightfast.vtr.vo_prior import PriorGate
 
-__all__ = ["FeatureSupplier", "Localization", "MapLocalizer", "PriorGate"]
+__all__ = ["FeatureSupplier", "Localization", "MapLocalizer"]
 
 log = logging.getLogger(__name__)
 
@@ -73,29 +72,6 @@ class Localization:
 
 
 FeatureSupplier = Callable[[], Mapping[str, StereoFeatures]]
-
-
-@dataclass(frozen=True)
-class PriorGate:
-    """Where a windowed localization may put the camera relative to its VO prior: within ``radius_m`` of the prior's
-    position, or within ``sigmas`` standard deviations of the prior's own position uncertainty ``position_cov``
-    (3×3, m², in the reference keyframe's frame; a Mahalanobis distance): a VO step resting on far points is
-    uncertain along the optical axis, and the localization that mends it lies there."""
-
-    radius_m: float = math.inf
-    position_cov: NDArray[np.float64] | None = None
-    sigmas: float = 0.0
-    #: fewest inliers of a localization admitted by the Mahalanobis test (beyond ``radius_m``)
-    min_inliers_beyond_radius: int = 0
-
-    def admits(self, offset_m: NDArray[np.float64], inliers: int | None = None) -> bool:
-        """Whether a localization ``offset_m`` (3,) from the prior's position, with ``inliers``, passes."""
-        if float(np.linalg.norm(offset_m)) <= self.radius_m:
-            return True
-        if self.sigmas <= 0.0 or (inliers is not None and inliers < self.min_inliers_beyond_radius):
-            return False
-        d2 = mahalanobis_sq(offset_m, self.position_cov)
-        return d2 is not None and d2 <= self.sigmas**2
 
 
 @dataclass(frozen=True)

@@ -36,6 +36,7 @@ from typing import TYPE_CHECKING
 
 from lightfast.vtr.features import StereoFeatures
 from lightfast.vtr.pose_estimation import StereoCamera
+from lightfast.vtr.vo_prior import PriorGate
 
 if TYPE_CHECKING:  # localization calls search_map: annotations only, no import cycle at run time
     from lightfast.vtr.localization import FeatureSupplier, Localization, MapLocalizer
@@ -82,8 +83,6 @@ def _verified(localizer: MapLocalizer, features: Mapping[str, StereoFeatures], c
               place: Localization, more: FeatureSupplier | None) -> Localization:
     """``place`` localized again by guided matching from its own pose (module docstring); ``place`` itself if
     that fails or finds fewer inliers."""
-    from lightfast.vtr.localization import PriorGate  # run time: localization imports this module
-
     k = place.ref_index
     loc = localizer.localize(features, camera, k, localizer.map.window(k, localizer.config.window_radius),
                              place.T_ref_cam, more, PriorGate(localizer.config.search_distinct_m))

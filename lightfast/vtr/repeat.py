@@ -43,7 +43,7 @@ from lightfast.config import ConfigError, config_from_mapping
 from lightfast.vtr.color_constant import ColorConstantConfig
 from lightfast.vtr.errors import VtrInputError
 from lightfast.vtr.features import StereoFeatures
-from lightfast.vtr.localization import FeatureSupplier, Localization, MapLocalizer, PriorGate
+from lightfast.vtr.localization import FeatureSupplier, Localization, MapLocalizer
 from lightfast.vtr.map_store import TeachMap
 from lightfast.vtr.pose_estimation import StereoCamera
 from lightfast.vtr.repeat_config import RepeatConfig
@@ -51,7 +51,7 @@ from lightfast.vtr.stereo_config import StereoConfig
 from lightfast.vtr.stereo_front_end import check_stereo_pair
 from lightfast.vtr.teach import SourceFrontEnd
 from lightfast.vtr.visual_odometry import VisualOdometry, VisualOdometryConfig, VoResult
-from lightfast.vtr.vo_prior import add_keyframe_noise, fuse, propagate_covariance
+from lightfast.vtr.vo_prior import PriorGate, add_keyframe_noise, fuse, propagate_covariance
 
 __all__ = ["RepeatPipeline", "RepeatResult"]
 

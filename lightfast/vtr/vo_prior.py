@@ -11,17 +11,20 @@ quadratic terms), instead of replacing it: a localization resting on far landmar
 along its optical axis poorly, and the prior holds what the image cannot (measured on the development route:
 ``docs/vtr.md``). The localization's covariance is its nominal one (1 px noise) times ``cov_scale²``: the nominal
 covariance ignores landmark depth noise and the window's chained teach edges and is far too small.
+A windowed localization is accepted only where :class:`PriorGate` admits it: near the prior's position, or within
+some standard deviations of the prior's own position uncertainty.
 """
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 
 from lightfast.geometry import hat, inverse, se3_exp, se3_log
 
-__all__ = ["add_keyframe_noise", "adjoint", "fuse", "mahalanobis_sq", "propagate_covariance"]
+__all__ = ["PriorGate", "add_keyframe_noise", "adjoint", "fuse", "mahalanobis_sq", "propagate_covariance"]
 
 Array = NDArray[np.float64]
 
@@ -82,3 +85,26 @@ def fuse(T_loc: Array, C_loc: Array, T_prior: Array, P_prior: Array) -> tuple[Ar
         return T_loc, C_loc
     xi = C @ info_prior @ se3_log(inverse(T_loc) @ T_prior)
     return T_loc @ se3_exp(xi), C
+
+
+@dataclass(frozen=True)
+class PriorGate:
+    """Where a windowed localization may put the camera relative to its VO prior: within ``radius_m`` of the prior's
+    position, or within ``sigmas`` standard deviations of the prior's own position uncertainty ``position_cov``
+    (3×3, m², in the reference keyframe's frame; a Mahalanobis distance): a VO step resting on far points is
+    uncertain along the optical axis, and the localization that mends it lies there."""
+
+    radius_m: float = math.inf
+    position_cov: NDArray[np.float64] | None = None
+    sigmas: float = 0.0
+    #: fewest inliers of a localization admitted by the Mahalanobis test (beyond ``radius_m``)
+    min_inliers_beyond_radius: int = 0
+
+    def admits(self, offset_m: NDArray[np.float64], inliers: int | None = None) -> bool:
+        """Whether a localization ``offset_m`` (3,) from the prior's position, with ``inliers``, passes."""
+        if float(np.linalg.norm(offset_m)) <= self.radius_m:
+            return True
+        if self.sigmas <= 0.0 or (inliers is not None and inliers < self.min_inliers_beyond_radius):
+            return False
+        d2 = mahalanobis_sq(offset_m, self.position_cov)
+        return d2 is not None and d2 <= self.sigmas**2

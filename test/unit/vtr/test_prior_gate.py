@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from lightfast.vtr.localization import PriorGate
+from lightfast.vtr.vo_prior import PriorGate
 
 
 def test_the_radius_alone_without_a_covariance() -> None:
