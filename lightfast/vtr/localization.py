@@ -196,7 +196,8 @@ class MapLocalizer:
         gated = False
         if success and T_ref_cam_prior is not None and gate is not None:
             offset = est.T_ref_cur[:3, 3] - T_ref_cam_prior[:3, 3]
-            if not gate.admits(offset, est.num_inliers):
+            R = est.T_ref_cur[:3, :3]
+            if not gate.admits(offset, est.num_inliers, R @ est.covariance[:3, :3] @ R.T):
                 success, gated = False, True
                 log.debug("localization at keyframe %d rejected: %d inliers but %.2f m from the VO prior (gate "
                           "%.2f m)", ref, est.num_inliers, float(np.linalg.norm(offset)), gate.radius_m)

@@ -1,32 +1,32 @@
 """Repeat phase of colour-constant stereo VT&R: paper §IV-B (Fig. 3–4) and §IV-C (localization failure).
 
-Per rectified stereo frame (:meth:`RepeatPipeline.step`, the call a node makes per synchronized pair: rgb8 images and
-their ``camera_info`` projection matrices in, :class:`RepeatResult` out):
-
+Per rectified stereo pair (:meth:`RepeatPipeline.step`: rgb8 images and projection matrices in, :class:`RepeatResult`
+out):
 1. **Front end** (:class:`~lightfast.vtr.teach.SourceFrontEnd`): landmarks of the image sources the mode needs.
 2. **VO on greyscale** (§IV-B 2: "VO is performed using only the greyscale images"): ``T_prev_cur`` of
    :class:`~lightfast.vtr.visual_odometry.VisualOdometry` moves the last pose to the prior ``T_kf_cam`` ("The VO
    estimate is fed to the localizer as a prior, and is used as the final pose estimate if localization fails"; if
    the VO fails, the prior moves along the taught path at the last localized frames' speed).
-3. **Expected nearest keyframe**: the prior's distance along the taught path (keyframe path distance + the camera
-   position projected on the local path direction) → :meth:`~lightfast.vtr.map_store.TeachMap.nearest`; the prior is
-   re-expressed in that keyframe's frame.
+3. **Expected nearest keyframe** by the prior's distance along the taught path
+   (:meth:`~lightfast.vtr.map_store.TeachMap.nearest`); the prior is re-expressed in that keyframe's frame.
 4. **Localization against a window of keyframes** around it (``window_radius`` on each side) by
    :class:`~lightfast.vtr.localization.MapLocalizer` (modes ``fused``, ``grey``, ``mcmanus``), within the prior gate
-   ``prior_gate_m + prior_gate_per_m · (distance on VO)`` of the VO prior — unless the previous frame's localization
-   was beyond the gate as well, both have ``confirm_beyond_gate_inliers`` inliers and they agree after the VO motion
-   between them: then the prior is the wrong one (a VO step gone astray); else it is fused with it (``vo_prior``).
+   ``prior_gate_m + prior_gate_per_m · (distance on VO)`` of the VO prior or within standard deviations of both
+   (:class:`~lightfast.vtr.vo_prior.PriorGate`) — unless the previous frame's was beyond the gate too, both with
+   ``confirm_beyond_gate_inliers`` inliers, agreeing after the VO motion: then the prior is wrong (a VO step gone
+   astray); else it is fused with the prior (``vo_prior``).
 5. **Failure handling** (§IV-C): without success the VO prior is the pose and the distance driven on VO alone
    accumulates; beyond ``max_distance_on_vo_m`` (20 m) it is a **localization failure**: the robot "stops" and the
    whole map is searched (:mod:`lightfast.vtr.map_search`) every frame until a place has the evidence that rules
    out look-alikes (``search_min_inliers``, ``search_margin``, and below ``search_accept_inliers`` a search of the
-   next ``search_hold_frames`` finding it again; ``relocalized``; the gate then widens by ``search_gate_sigmas``).
-   Before the first localization likewise; with ``initial_keyframe`` its window is tried until the failure distance.
+   next ``search_hold_frames`` finding it again; ``relocalized``; the gate widens by ``search_gate_sigmas`` until
+   ``search_confirm_inliers`` confirm it). Likewise before the first localization (``initial_keyframe``: its window
+   first, until the failure distance).
 
-Output per frame: :class:`RepeatResult` — ``T_kf_cam`` (the camera in the frame of keyframe ``keyframe_index``, the one
-nearest along the path; metres, REP-103 optical axes), whether this frame localized, inliers per source, the distance
-on VO since the last localization (m), the failure flag (every frame of the failure state, from the one starting it
-to the one relocalizing, and before the first localization: the robot would not drive) and the search's success.
+Output per frame: :class:`RepeatResult` — ``T_kf_cam`` (the camera in keyframe ``keyframe_index``'s frame, the one
+nearest along the path; metres, REP-103 optical axes), whether it localized, inliers per source, the distance on VO
+since the last localization (m), the failure flag (every frame from a failure to the relocalization, and before the
+first localization: the robot would not drive) and the search's success.
 """
 from __future__ import annotations
 
@@ -133,7 +133,7 @@ class RepeatPipeline:
         self._cov: NDArray[np.float64] | None = None  # of _T_ref_cam (vo_prior's convention); None: unknown
         self._distance_on_vo_m = 0.0
         self._lost = False
-        self._after_search = False  # the pose comes from a place of the whole-map search (search_gate_sigmas)
+        self._after_search = False  # the pose rests on a search place not yet confirmed (search_gate_sigmas)
         self._gated: tuple[int, NDArray[np.float64]] | None = None  # last frame's localization beyond the gate
         # weak places of the whole-map search: (frame number, keyframe, T_ref_cam moved to the last frame)
         self._held: list[tuple[int, int, NDArray[np.float64]]] = []
@@ -281,7 +281,7 @@ class RepeatPipeline:
             self._gated = (loc.ref_index, loc.T_ref_cam)
         if localized:
             assert loc is not None
-            self._after_search = relocalized
+            self._after_search = relocalized or (self._after_search and loc.inliers < c.search_confirm_inliers)
             self._distance_on_vo_m = 0.0
             self._ref, self._T_ref_cam = self._reanchor(loc.ref_index, loc.T_ref_cam)
             self._cov = loc.covariance if np.all(np.isfinite(loc.covariance)) else None
@@ -360,7 +360,7 @@ class RepeatPipeline:
             R = prior[:3, :3]
             position_cov = R @ prior_cov[:3, :3] @ R.T
         return PriorGate(c.prior_gate_m + c.prior_gate_per_m * (self._distance_on_vo_m + step_m), position_cov,
-                         sigmas, min_inliers)
+                         sigmas, min_inliers, c.localization_cov_scale if c.prior_gate_innovation else 0.0)
 
     def _strong_beyond_gate(self, loc: Localization) -> bool:
         """Rejected by the prior gate only, with ``confirm_beyond_gate_inliers`` (> 0) inliers."""

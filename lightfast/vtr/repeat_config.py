@@ -117,11 +117,23 @@ class RepeatConfig(Config):
         "changed lighting (docs/vtr.md, 'Gates that follow the uncertainty').", min=0.0,
     )
     search_gate_sigmas: float = param(
-        3.0, description="From a place of the whole-map search until the next windowed localization is accepted, the "
-        "prior gate also admits a localization with search_min_inliers inliers within this many standard deviations "
-        "of the prior's position uncertainty (the search's own covariance, propagated): a place found on far "
-        "landmarks is uncertain along the optical axis, and prior_gate_m alone would protect its error. 0: off.",
-        min=0.0,
+        3.0, description="From a place of the whole-map search until a windowed localization with "
+        "search_confirm_inliers inliers is accepted, the prior gate also admits a localization with "
+        "search_min_inliers inliers within this many standard deviations of the prior's position uncertainty (the "
+        "search's own covariance, propagated): a place found on far landmarks is uncertain along the optical axis, "
+        "and prior_gate_m alone would protect its error. 0: off.", min=0.0,
+    )
+    prior_gate_innovation: bool = param(
+        True, description="The Mahalanobis test of the prior gate reads the localization's own position covariance "
+        "(x localization_cov_scale^2) added to the prior's: the innovation covariance of a Kalman filter's validation "
+        "gate. A localization resting on far points is uncertain along the optical axis as well, and the prior's "
+        "covariance alone, shrunk by the fusions, refused the localizations that would mend it (docs/vtr.md, 'A "
+        "search place is confirmed by a strong localization'). False: the prior's alone.",
+    )
+    search_confirm_inliers: int = param(
+        30, description="The gate of search_gate_sigmas stays open from a place of the whole-map search until a "
+        "windowed localization with at least this many inliers is accepted: a weaker one admitted next to the place "
+        "was admitted because it lay there, and confirms nothing. 0: until the next accepted localization.", min=0,
     )
     confirm_beyond_gate_inliers: int = param(
         30, description="Accept a windowed localization beyond the prior gate when it and the previous frame's, also "

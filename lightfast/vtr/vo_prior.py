@@ -99,12 +99,20 @@ class PriorGate:
     sigmas: float = 0.0
     #: fewest inliers of a localization admitted by the Mahalanobis test (beyond ``radius_m``)
     min_inliers_beyond_radius: int = 0
+    #: > 0: the Mahalanobis test adds the localization's own position covariance × this² to ``position_cov`` (the
+    #: innovation covariance of a Kalman filter's validation gate, Bar-Shalom & Fortmann 1988)
+    measurement_cov_scale: float = 0.0
 
-    def admits(self, offset_m: NDArray[np.float64], inliers: int | None = None) -> bool:
-        """Whether a localization ``offset_m`` (3,) from the prior's position, with ``inliers``, passes."""
+    def admits(self, offset_m: NDArray[np.float64], inliers: int | None = None,
+               measurement_cov: NDArray[np.float64] | None = None) -> bool:
+        """Whether a localization ``offset_m`` (3,) from the prior's position, with ``inliers`` and its own position
+        covariance ``measurement_cov`` (3×3, m², nominal; read with ``measurement_cov_scale`` > 0), passes."""
         if float(np.linalg.norm(offset_m)) <= self.radius_m:
             return True
         if self.sigmas <= 0.0 or (inliers is not None and inliers < self.min_inliers_beyond_radius):
             return False
-        d2 = mahalanobis_sq(offset_m, self.position_cov)
+        cov = self.position_cov
+        if cov is not None and measurement_cov is not None and self.measurement_cov_scale > 0.0:
+            cov = cov + self.measurement_cov_scale**2 * measurement_cov
+        d2 = mahalanobis_sq(offset_m, cov)
         return d2 is not None and d2 <= self.sigmas**2

@@ -1,4 +1,4 @@
-"""The prior gate of a windowed localization (:class:`lightfast.vtr.localization.PriorGate`): a radius, widened along
+"""The prior gate of a windowed localization (:class:`lightfast.vtr.vo_prior.PriorGate`): a radius, widened along
 the directions in which the VO prior itself is uncertain."""
 from __future__ import annotations
 
@@ -34,3 +34,20 @@ def test_the_widened_gate_can_ask_for_more_inliers() -> None:
     along = np.array([0.0, 0.0, 1.2])
     assert gate.admits(along, 12) and not gate.admits(along, 11)
     assert gate.admits(np.array([0.0, 0.0, 0.4]), 6)
+
+
+def test_the_innovation_gate_adds_the_localizations_own_uncertainty() -> None:
+    """With ``measurement_cov_scale`` the Mahalanobis test reads the prior's and the localization's covariances
+    together (a Kalman filter's validation gate): a prior that claims 0.3 m along z refuses a localization 1.5 m
+    along z (5 sigma) on its own, but admits it when the localization itself is 0.4 m uncertain there (scaled ×1:
+    1.5 / 0.5 = 3 sigma); a localization that claims 5 cm is still refused, and sideways nothing changes."""
+    prior = np.diag([0.05**2, 0.05**2, 0.3**2])
+    loose, tight = np.diag([0.02**2, 0.02**2, 0.4**2]), np.diag([0.02**2, 0.02**2, 0.05**2])
+    along, across = np.array([0.0, 0.0, 1.49]), np.array([1.49, 0.0, 0.0])
+    assert not PriorGate(0.5, prior, sigmas=3.0).admits(along, 50, loose)
+    gate = PriorGate(0.5, prior, sigmas=3.0, measurement_cov_scale=1.0)
+    assert gate.admits(along, 50, loose) and not gate.admits(along, 50, tight)
+    assert not gate.admits(across, 50, loose)
+    assert not gate.admits(along, 50) and not gate.admits(along, 50, np.full((3, 3), np.inf))
+    assert not PriorGate(0.5, prior, sigmas=3.0, min_inliers_beyond_radius=30,
+                         measurement_cov_scale=1.0).admits(along, 29, loose)

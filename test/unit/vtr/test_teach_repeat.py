@@ -830,6 +830,51 @@ def test_a_search_place_off_along_the_optical_axis_is_mended_by_the_next_localiz
         rp.close()
 
 
+def test_a_search_place_stays_open_until_a_strong_localization_confirms_it(taught: Taught, repeat_features):
+    """A weak localization admitted next to a search place does not confirm it: the gate admitted it because it lay
+    near that place. Planted: the search's place 1.5 m too far along z (1.5 m standard deviation there), then at
+    frame 13 a weak localization (15 inliers, 1 m along z) at the prior itself. Frame 14's correct localization lies
+    1.5 m from the prior: with search_confirm_inliers 30 the search gate is still open and admits it (pose mended);
+    with 0 the weak one closed it and the pose stays off (prior_gate_sigmas off)."""
+    from dataclasses import replace as dc_replace
+
+    from lightfast.vtr.visual_odometry import VoResult
+
+    camera = StereoCamera.from_projections(P_LEFT, P_RIGHT)
+    feats = repeat_features["teach"]
+    truth = [pose(REPEAT_X, z, REPEAT_YAW_DEG) for z in REPEAT_Z]
+    steps = [VoResult(np.linalg.inv(truth[i - 1]) @ truth[i], True, 50, 50, True) for i in (13, 14)]
+    weak_cov = np.diag([0.05**2, 0.05**2, 1.0**2] + [1e-6] * 3)
+    for confirm, mended in ((30, True), (0, False)):
+        rp = RepeatPipeline(taught.teach_map, _repeat_config(
+            "fused", search_accept_inliers=0, search_gate_sigmas=3.0, prior_gate_sigmas=0.0,
+            localization_cov_scale=1.0, search_confirm_inliers=confirm))
+        search, localize = rp.localizer.search, rp.localizer.localize
+
+        def off_search(*args, search=search, **kwargs):
+            loc = search(*args, **kwargs)
+            T = loc.T_ref_cam.copy()
+            T[:3, 3] += T[:3, 2] * 1.5  # 1.5 m along the camera's optical axis
+            return dc_replace(loc, T_ref_cam=T, covariance=np.diag([0.05**2, 0.05**2, 1.5**2] + [1e-6] * 3))
+
+        def weak_at_prior(features, camera, ref, window, prior, more=None, gate=None, localize=localize):
+            loc = localize(features, camera, ref, window, prior, more, gate)
+            return dc_replace(loc, T_ref_cam=prior.copy(), success=True, gated=False, inliers_per_source={"grey": 15},
+                              covariance=weak_cov)
+
+        rp.localizer.search = off_search
+        a = rp._localize_step(0, VoResult(np.eye(4), True, 0, 0, False, first=True), feats[12], camera, None)
+        rp.localizer.localize = weak_at_prior
+        b = rp._localize_step(STAMP_STEP_NS, steps[0], feats[13], camera, None)
+        rp.localizer.localize = localize
+        c = rp._localize_step(2 * STAMP_STEP_NS, steps[1], feats[14], camera, None)
+        kf_z = taught.kf_pose[c.keyframe_index][2, 3]
+        error_m = abs(kf_z + c.T_kf_cam[2, 3] - REPEAT_Z[14])
+        assert a.relocalized and b.localized and c.localized == mended, (confirm, c)
+        assert error_m < 0.1 if mended else error_m > 1.2, (confirm, error_m)
+        rp.close()
+
+
 def test_a_vo_step_gone_astray_along_the_optical_axis_is_mended_when_the_step_says_so(taught: Taught,
                                                                                      repeat_features):
     """A VO step 0.8 m too long along the optical axis puts the prior beyond the 0.63 m gate radius of the correct
