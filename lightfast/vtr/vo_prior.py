@@ -12,7 +12,7 @@ along its optical axis poorly, and the prior holds what the image cannot (measur
 ``docs/vtr.md``). The localization's covariance is its nominal one (1 px noise) times ``cov_scale²``: the nominal
 covariance ignores landmark depth noise and the window's chained teach edges and is far too small.
 A windowed localization is accepted only where :class:`PriorGate` admits it: near the prior's position, or within
-some standard deviations of the prior's own position uncertainty.
+some standard deviations of the prior's and the localization's position uncertainty together (an innovation gate).
 """
 from __future__ import annotations
 
@@ -91,8 +91,9 @@ def fuse(T_loc: Array, C_loc: Array, T_prior: Array, P_prior: Array) -> tuple[Ar
 class PriorGate:
     """Where a windowed localization may put the camera relative to its VO prior: within ``radius_m`` of the prior's
     position, or within ``sigmas`` standard deviations of the prior's own position uncertainty ``position_cov``
-    (3×3, m², in the reference keyframe's frame; a Mahalanobis distance): a VO step resting on far points is
-    uncertain along the optical axis, and the localization that mends it lies there."""
+    (3×3, m², in the reference keyframe's frame; a Mahalanobis distance; with ``measurement_cov_scale`` the
+    localization's own uncertainty is added): a VO step resting on far points is uncertain along the optical axis,
+    and the localization that mends it lies there."""
 
     radius_m: float = math.inf
     position_cov: NDArray[np.float64] | None = None
