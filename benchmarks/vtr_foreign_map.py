@@ -38,12 +38,13 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from lightfast.config import replace_config  # noqa: E402
-from lightfast.eval.vtr.inputs import sim_runs, stereo_frames  # noqa: E402
+from lightfast.eval.vtr.inputs import SimRun, sim_runs, stereo_frames  # noqa: E402
 from lightfast.eval.vtr.runs import teach_map  # noqa: E402
 from lightfast.io import json_finite, write_text_atomic  # noqa: E402
 from lightfast.progress import track  # noqa: E402
 from lightfast.vtr import RepeatPipeline  # noqa: E402
 from lightfast.vtr.localizer_config import VtrLocalizerConfig  # noqa: E402
+from lightfast.vtr.map_store import TeachMap  # noqa: E402
 
 #: The paper's acceptance (§IV-C): the best place of the search with six inliers, nothing else.
 PAPER_RULE = {"repeat.search_min_inliers": 6, "repeat.search_margin": 1.0, "repeat.search_accept_inliers": 6,
@@ -64,22 +65,17 @@ class Count:
     seconds: float = 0.0
 
 
-def run_foreign(map_route: Path, frames_route: Path, run: str, mode: str, rule: str, max_frames: int | None,
+def run_foreign(tmap: TeachMap, run: SimRun, mode: str, rule: str, max_frames: int | None,
                 progress: bool) -> Count:
-    """``run`` of ``frames_route`` against ``map_route``'s teach map with ``mode`` and the acceptance ``rule``."""
+    """``run`` (of another route) against the teach map ``tmap`` with ``mode`` and the acceptance ``rule``."""
     overrides: dict[str, Any] = {"repeat.mode": mode} | (PAPER_RULE if rule == "paper" else {})
     cfg = replace_config(VtrLocalizerConfig(), overrides)
-    maps = {r.name: r for r in sim_runs(map_route)}
-    runs = {r.name: r for r in sim_runs(frames_route)}
-    if "teach" not in maps or run not in runs:
-        raise SystemExit(f"vtr_foreign_map: {map_route} needs a teach run and {frames_route} a run {run!r}")
-    tmap, _ = teach_map(maps["teach"], map_route / "vtr_maps", cfg)
     rp = RepeatPipeline(tmap, cfg.repeat, vo=cfg.vo)
-    out = Count(rule, mode, run)
+    out = Count(rule, mode, run.name)
     t0 = time.perf_counter()
-    total = int(runs[run].info.get("frames", 0)) or None
+    total = int(run.info.get("frames", 0)) or None
     try:
-        for i, (stamp, left, right, Pl, Pr) in enumerate(track(stereo_frames(runs[run].path / "bag"),
+        for i, (stamp, left, right, Pl, Pr) in enumerate(track(stereo_frames(run.path / "bag"),
                                                                desc=f"{run} {mode} {rule}", total=total,
                                                                enabled=progress, unit="frame")):
             if max_frames is not None and i >= max_frames:
@@ -139,11 +135,16 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--no-progress", action="store_true")
     a = ap.parse_args(argv)
     logging.basicConfig(level=logging.WARNING)
+    maps = {r.name: r for r in sim_runs(a.map_route)}
+    runs = {r.name: r for r in sim_runs(a.frames_route)}
+    if "teach" not in maps or not set(a.runs) <= set(runs):
+        raise SystemExit(f"vtr_foreign_map: {a.map_route} needs a teach run and {a.frames_route} the runs {a.runs}")
+    tmap, _ = teach_map(maps["teach"], a.map_route / "vtr_maps")  # the teach key does not depend on the mode
     counts = []
     for mode in a.modes:
         for run in a.runs:
             for rule in ("node", "paper"):
-                c = run_foreign(a.map_route, a.frames_route, run, mode, rule, a.max_frames, not a.no_progress)
+                c = run_foreign(tmap, runs[run], mode, rule, a.max_frames, not a.no_progress)
                 print(f"{rule:5s} {mode:5s} {run}: {c.frames} frames, found {c.found}, refused {c.refused}, held "
                       f"{c.held}, localized (false) {c.localized}", flush=True)
                 counts.append(c)
