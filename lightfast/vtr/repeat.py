@@ -18,10 +18,10 @@ out):
 5. **Failure handling** (§IV-C): without success the VO prior is the pose and the distance driven on VO alone
    accumulates; beyond ``max_distance_on_vo_m`` (20 m) it is a **localization failure**: the robot "stops" and the
    whole map is searched (:mod:`lightfast.vtr.map_search`) every frame until a place has the evidence that rules
-   out look-alikes (``search_min_inliers``, ``search_margin``, and below ``search_accept_inliers`` a search of the
-   next ``search_hold_frames`` finding it again; ``relocalized``; the gate widens by ``search_gate_sigmas`` until
-   ``search_confirm_inliers`` confirm it). Likewise before the first localization (``initial_keyframe``: its window
-   first, until the failure distance).
+   out look-alikes (``search_min_inliers``, ``search_margin``; below ``search_accept_inliers`` found again within
+   ``search_hold_frames`` by a search or a windowed localization from it, ``search_track_held``; ``relocalized``; the
+   gate widens by ``search_gate_sigmas`` until ``search_confirm_inliers`` confirm it). Likewise before the first
+   localization (``initial_keyframe``: its window first, until the failure distance).
 
 Output per frame: :class:`RepeatResult` — ``T_kf_cam`` (the camera in keyframe ``keyframe_index``'s frame, the one
 nearest along the path; metres, REP-103 optical axes), whether it localized, inliers per source, the distance on VO
@@ -253,15 +253,18 @@ class RepeatPipeline:
                                 self._distance_on_vo_m, c.max_distance_on_vo_m)
                 self._lost = self._lost or prior is not None
                 failure = True
-                if not start_hint:
+                tracked = None if start_hint else self._held_tracked(features, camera, more)
+                if tracked is not None:
+                    loc, localized = tracked, True
+                    log.info("relocalized at keyframe %d: a held place of the search tracked with %d inliers",
+                             loc.ref_index, loc.inliers)
+                elif not start_hint:
                     t = time.perf_counter()
                     loc = self._scaled(self.localizer.search(features, camera, more))
                     timing["search"] = time.perf_counter() - t
                     searched = True
                     if loc.success and self._unambiguous(loc) and self._found_again(loc):
-                        localized = relocalized = True
-                        self._lost = False
-                        self._held.clear()
+                        localized = True
                         log.info("relocalized at keyframe %d with %d inliers (next distinct place %d)",
                                  loc.ref_index, loc.inliers, loc.runner_up_inliers)
                     elif loc.success and self._unambiguous(loc):
@@ -275,6 +278,9 @@ class RepeatPipeline:
                         log.info("whole-map search: keyframe %d with %d inliers refused (a distinct place has %d; "
                                  "needs %d and %.3g times as many)", loc.ref_index, loc.inliers,
                                  loc.runner_up_inliers, c.search_min_inliers, c.search_margin)
+                if localized:
+                    relocalized, self._lost = True, False
+                    self._held.clear()
 
         self._gated = None
         if loc is not None and not localized and self._strong_beyond_gate(loc):
@@ -336,6 +342,21 @@ class RepeatPipeline:
         if loc.inliers >= c.search_accept_inliers:
             return True
         return any(self._offset_m(loc, (ref, T)) <= c.search_agree_m for _, ref, T in self._held)
+
+    def _held_tracked(self, features: Mapping[str, StereoFeatures], camera: StereoCamera,
+                      more: FeatureSupplier | None) -> Localization | None:
+        """A held place found again by a windowed localization from it (``search_track_held``): guided matching from
+        the place moved by the motion since, with ``search_min_inliers`` inliers within ``prior_gate_m`` of it (the
+        newest held place first); None if none is."""
+        c = self.config
+        if not c.search_track_held:
+            return None
+        for _, ref, T_ref_cam in reversed(self._held):
+            loc = self.localizer.localize(features, camera, ref, self.map.window(ref, c.window_radius), T_ref_cam,
+                                          more, PriorGate(c.prior_gate_m))
+            if loc.success and loc.inliers >= c.search_min_inliers:
+                return self._scaled(loc)
+        return None
 
     def _offset_m(self, loc: Localization, place: tuple[int, NDArray[np.float64]]) -> float:
         """Distance (m) between ``loc``'s camera and ``place`` = ``(keyframe, T_ref_cam)`` (an earlier frame's, moved to

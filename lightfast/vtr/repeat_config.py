@@ -214,6 +214,13 @@ class RepeatConfig(Config):
         1.0, description="A held place of the whole-map search, moved by the VO motion since, and this frame's place "
         "agree when their camera positions are this close, m.", min=0.0,
     )
+    search_track_held: bool = param(
+        False, description="A held place is also found again by a windowed localization from it (guided matching from "
+        "the place moved by the VO motion) with search_min_inliers inliers within prior_gate_m of it. At dusk it finds "
+        "the right place on frames where the unguided search misses it, but guided matching from a place off along "
+        "the optical axis confirms it there (a low-sun greyscale repeat accepted a place 3.5 m off): off by default "
+        "(docs/vtr.md, 'Tracking a held place').",
+    )
     initial_keyframe: int = param(
         -1, description="Keyframe where the repeat starts (-1: search the whole map for the first localization).",
         min=-1,

@@ -768,6 +768,36 @@ def test_a_weak_place_of_the_search_needs_the_next_frame(taught: Taught, repeat_
         rp.close()
 
 
+def test_a_held_place_is_found_again_by_a_windowed_localization_from_it(taught: Taught, repeat_features):
+    """At dusk the unguided search misses the right place on most frames, while a windowed localization from the
+    held place, moved by the VO motion, finds it. Planted: the search of the frame after the held place finds
+    nothing. With search_track_held the place is found again by guided matching from it (relocalized without a
+    search, pose within 0.1 m); without it the robot stays lost. When the images are not where the held place
+    predicts (frame 16's: the robot 1.5 m farther, as from a look-alike's place), guided matching finds nothing
+    within the gate: still lost."""
+    from dataclasses import replace as dc_replace
+
+    from lightfast.vtr.visual_odometry import VoResult
+
+    camera = StereoCamera.from_projections(P_LEFT, P_RIGHT)
+    feats = repeat_features["teach"]
+    motion = np.linalg.inv(pose(REPEAT_X, REPEAT_Z[12], REPEAT_YAW_DEG)) @ pose(REPEAT_X, REPEAT_Z[13],
+                                                                                REPEAT_YAW_DEG)
+    for track, next_frame, expected in ((True, 13, True), (False, 13, False), (True, 16, False)):
+        rp = RepeatPipeline(taught.teach_map, _repeat_config("fused", search_accept_inliers=10**6,
+                                                             search_track_held=track))
+        a = rp._localize_step(0, VoResult(np.eye(4), True, 0, 0, False, first=True), feats[12], camera, None)
+        assert a.searched_map and not a.localized and rp.held_places == 1, a
+        search = rp.localizer.search
+        rp.localizer.search = lambda *args, search=search, **kw: dc_replace(search(*args, **kw), success=False)
+        b = rp._localize_step(STAMP_STEP_NS, VoResult(motion, True, 50, 50, True), feats[next_frame], camera, None)
+        assert b.localized == b.relocalized == expected and b.searched_map != expected, (track, next_frame, b)
+        if expected:
+            kf_z = taught.kf_pose[b.keyframe_index][2, 3]
+            assert abs(kf_z + b.T_kf_cam[2, 3] - REPEAT_Z[13]) < 0.1
+        rp.close()
+
+
 def test_a_weak_place_is_held_over_a_frame_whose_search_finds_nothing(taught: Taught, repeat_features,
                                                                        black_features):
     """At dusk every other frame's search may find too little. A weak place held at frame 12 is found again by
