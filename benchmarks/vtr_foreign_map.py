@@ -32,13 +32,12 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from lightfast.config import replace_config  # noqa: E402
-from lightfast.eval.vtr.inputs import SimRun, sim_runs, stereo_frames  # noqa: E402
+from lightfast.eval.errors import VtrEvalError  # noqa: E402
+from lightfast.eval.vtr.inputs import SimRun, check_camera, sim_runs, stereo_frames  # noqa: E402
 from lightfast.eval.vtr.runs import teach_map  # noqa: E402
 from lightfast.io import json_finite, write_text_atomic  # noqa: E402
 from lightfast.progress import track  # noqa: E402
@@ -80,9 +79,8 @@ def run_foreign(tmap: TeachMap, run: SimRun, mode: str, rule: str, max_frames: i
                                                                enabled=progress, unit="frame")):
             if max_frames is not None and i >= max_frames:
                 break
-            if i == 0 and ((left.shape[1], left.shape[0]) != tmap.image_size
-                           or not (np.allclose(Pl, tmap.P_left) and np.allclose(Pr, tmap.P_right))):
-                raise SystemExit("vtr_foreign_map: the two routes' cameras differ")
+            if i == 0:
+                check_camera(run.name, tmap, left, Pl, Pr)
             held, refused = rp.held_places, rp.refused_places
             res = rp.step(stamp, left, right, Pl, Pr)
             out.frames += 1
@@ -144,7 +142,10 @@ def main(argv: list[str] | None = None) -> int:
     for mode in a.modes:
         for run in a.runs:
             for rule in ("node", "paper"):
-                c = run_foreign(tmap, runs[run], mode, rule, a.max_frames, not a.no_progress)
+                try:
+                    c = run_foreign(tmap, runs[run], mode, rule, a.max_frames, not a.no_progress)
+                except VtrEvalError as e:
+                    raise SystemExit(f"vtr_foreign_map: {e}") from None
                 print(f"{rule:5s} {mode:5s} {run}: {c.frames} frames, found {c.found}, refused {c.refused}, held "
                       f"{c.held}, localized (false) {c.localized}", flush=True)
                 counts.append(c)

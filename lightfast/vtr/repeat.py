@@ -133,7 +133,7 @@ class RepeatPipeline:
         self._cov: NDArray[np.float64] | None = None  # of _T_ref_cam (vo_prior's convention); None: unknown
         self._distance_on_vo_m = 0.0
         self._lost = False
-        self._after_search = False  # the pose rests on a search place not yet confirmed (search_gate_sigmas)
+        self._provisional = False  # the pose rests on a search place not yet confirmed (search_gate_sigmas)
         self._gated: tuple[int, NDArray[np.float64]] | None = None  # last frame's localization beyond the gate
         # weak places of the whole-map search: (frame number, keyframe, T_ref_cam moved to the last frame)
         self._held: list[tuple[int, int, NDArray[np.float64]]] = []
@@ -287,7 +287,7 @@ class RepeatPipeline:
             self._gated = (loc.ref_index, loc.T_ref_cam)
         if localized:
             assert loc is not None
-            self._after_search = relocalized or (self._after_search and loc.inliers < c.search_confirm_inliers)
+            self._provisional = relocalized or (self._provisional and loc.inliers < c.search_confirm_inliers)
             self._distance_on_vo_m = 0.0
             self._ref, self._T_ref_cam = self._reanchor(loc.ref_index, loc.T_ref_cam)
             self._cov = loc.covariance if np.all(np.isfinite(loc.covariance)) else None
@@ -374,7 +374,7 @@ class RepeatPipeline:
         if c.prior_gate_m <= 0:
             return None
         sigmas, min_inliers = c.prior_gate_sigmas, c.confirm_beyond_gate_inliers
-        if self._after_search and c.search_gate_sigmas > 0:
+        if self._provisional and c.search_gate_sigmas > 0:
             sigmas, min_inliers = max(sigmas, c.search_gate_sigmas), c.search_min_inliers
         position_cov = None  # only the Mahalanobis widening reads it
         if prior_cov is not None and sigmas > 0:

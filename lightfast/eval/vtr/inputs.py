@@ -4,6 +4,7 @@
   truth-side metadata), ordered by date and start time;
 - :func:`stereo_frames`: the stereo pairs of a run's bag, paired by exact stamp — the rgb8 left and right images and
   the ``camera_info`` projection matrices P (3×4, px), what ``vtr_localizer_node`` receives (no ground truth);
+- :func:`check_camera`: whether a run's first stereo pair has the teach map's image size and projections;
 - :func:`load_truth`: the run's ``truth.csv`` (read only for scoring) — per stamp (ns) the left camera's pose
   ``T_map_cam`` (m), its position along the route ``s_m`` (m) and the sun's elevation (deg).
 
@@ -24,6 +25,7 @@ from numpy.typing import NDArray
 from lightfast.bag.reader import open_bag
 from lightfast.eval.errors import VtrEvalError
 from lightfast.geometry import quat_to_matrix
+from lightfast.vtr.map_store import TeachMap
 
 _STEREO_TOPICS = ("/stereo/left/image_raw", "/stereo/right/image_raw", "/stereo/left/camera_info",
                   "/stereo/right/camera_info")
@@ -83,6 +85,15 @@ def stereo_frames(bag_dir: Path) -> Iterator[tuple[int, NDArray[np.uint8], NDArr
             if len(p) == 4:
                 del parts[stamp]
                 yield stamp, p[left_img], p[right_img], p[left_info], p[right_info]
+
+
+def check_camera(run_name: str, tmap: TeachMap, left: NDArray[np.generic], P_left: NDArray[np.float64],
+                 P_right: NDArray[np.float64]) -> None:
+    """Raise :class:`VtrEvalError` unless a run's stereo pair (its left image and projections) has the image size and
+    projection matrices of the teach map ``tmap``: the map's landmarks are in that camera's pixels."""
+    if ((left.shape[1], left.shape[0]) != tmap.image_size
+            or not (np.allclose(P_left, tmap.P_left) and np.allclose(P_right, tmap.P_right))):
+        raise VtrEvalError(f"{run_name}: the camera differs from the teach map's")
 
 
 @dataclass(frozen=True)

@@ -34,7 +34,7 @@ from lightfast.config import config_from_mapping, replace_config
 from lightfast.data.shared import shown_path
 from lightfast.eval.cache import code_version, content_digest, run_key
 from lightfast.eval.errors import VtrEvalError
-from lightfast.eval.vtr.inputs import SimRun, Truth, load_truth, sim_runs, stereo_frames
+from lightfast.eval.vtr.inputs import SimRun, Truth, check_camera, load_truth, sim_runs, stereo_frames
 from lightfast.eval.vtr.report import write_outputs
 from lightfast.eval.vtr.scoring import REPORTED_SOURCES, FrameRecord, RepeatRun
 from lightfast.geometry import rotation_angle_deg
@@ -118,9 +118,8 @@ def run_repeat(run: SimRun, tmap: TeachMap, teach_truth: Truth, mode: str, *,
                 unit="frame")):
             if max_frames is not None and i >= max_frames:
                 break
-            if i == 0 and ((left.shape[1], left.shape[0]) != tmap.image_size
-                           or not (np.allclose(Pl, tmap.P_left) and np.allclose(Pr, tmap.P_right))):
-                raise VtrEvalError(f"{run.name}: the camera differs from the teach map's")
+            if i == 0:
+                check_camera(run.name, tmap, left, Pl, Pr)
             t0 = time.perf_counter()
             res = rp.step(stamp, left, right, Pl, Pr)
             ms_total = 1e3 * (time.perf_counter() - t0)

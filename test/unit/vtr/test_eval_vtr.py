@@ -167,3 +167,21 @@ def test_bad_inputs(sim_dir, tmp_path, capsys):
     with pytest.raises(SystemExit):
         cli.main(["eval", "vtr", str(sim_dir), str(tmp_path / "o"), "--params-file", str(tmp_path / "none.yaml")])
     assert "no parameter file" in capsys.readouterr().err
+
+
+def test_a_run_with_another_camera_than_the_maps_is_refused():
+    """The map's landmarks are in its camera's pixels: a run with another image size or projection is refused."""
+    from types import SimpleNamespace
+
+    from lightfast.eval.vtr.inputs import check_camera
+
+    P_left = np.array([[200.0, 0, 160, 0], [0, 200, 120, 0], [0, 0, 1, 0]])
+    P_right = P_left.copy()
+    P_right[0, 3] = -200.0 * 0.24
+    tmap = SimpleNamespace(image_size=(320, 240), P_left=P_left, P_right=P_right)
+    image = np.zeros((240, 320, 3), np.uint8)
+    check_camera("repeat01", tmap, image, P_left, P_right)  # the same camera passes
+    for left, Pl, Pr in ((np.zeros((120, 160, 3), np.uint8), P_left, P_right), (image, 1.1 * P_left, P_right),
+                         (image, P_left, P_left)):
+        with pytest.raises(VtrEvalError, match="repeat01: the camera differs"):
+            check_camera("repeat01", tmap, left, Pl, Pr)
