@@ -12,9 +12,9 @@ out):
 4. **Localization against a window of keyframes** around it (``window_radius`` on each side) by
    :class:`~lightfast.vtr.localization.MapLocalizer` (modes ``fused``, ``grey``, ``mcmanus``), within the prior gate
    ``prior_gate_m + prior_gate_per_m · (distance on VO)`` of the VO prior or within standard deviations of both
-   (:class:`~lightfast.vtr.vo_prior.PriorGate`) — unless the previous frame's was beyond the gate too, both with
-   ``confirm_beyond_gate_inliers`` inliers, agreeing after the VO motion: then the prior is wrong (a VO step gone
-   astray); else it is fused with the prior (``vo_prior``).
+   (:class:`~lightfast.vtr.vo_prior.PriorGate`); fused with the prior (``vo_prior``) — unless it and the previous
+   frame's lie beyond the radius (refused, or admitted by the widening: ``confirm_admitted``), both with
+   ``confirm_beyond_gate_inliers`` inliers, agreeing after the VO motion: then the prior is wrong and is replaced.
 5. **Failure handling** (§IV-C): without success the VO prior is the pose and the distance driven on VO alone
    accumulates; beyond ``max_distance_on_vo_m`` (20 m) it is a **localization failure**: the robot "stops" and the
    whole map is searched (:mod:`lightfast.vtr.map_search`) every frame until a place has the evidence that rules
@@ -222,18 +222,23 @@ class RepeatPipeline:
                                                    c.keyframe_rotation_noise_deg)
 
         loc: Localization | None = None
-        localized = relocalized = searched = failure = False
+        localized = relocalized = searched = failure = beyond = confirmed = False
+        beyond_place: tuple[int, NDArray[np.float64]] | None = None
         # never localized: try the start window (if given) until the failure distance, then the whole map
         start_hint = prior is None and c.initial_keyframe >= 0 and (
             self._distance_on_vo_m + step_m <= c.max_distance_on_vo_m)
         t = time.perf_counter()
         if prior is not None and not self._lost:
+            gate = self._prior_gate(prior, prior_cov, step_m)
             loc = self.localizer.localize(features, camera, ref, self.map.window(ref, c.window_radius), prior, more,
-                                          self._prior_gate(prior, prior_cov, step_m))
-            localized = loc.success or self._confirmed(loc, motion)
+                                          gate)
+            T_prior = self.map.T_a_b(loc.ref_index, ref) @ prior if loc.ref_index != ref else prior
+            beyond = self._strong_beyond_gate(loc, T_prior, gate)
+            beyond_place = (loc.ref_index, loc.T_ref_cam)  # before any fusion
+            confirmed = beyond and self._confirmed(loc, motion)
+            localized = loc.success or confirmed
             loc = self._scaled(loc)
-            if loc.success and c.fuse_vo_prior and prior_cov is not None:
-                T_prior = self.map.T_a_b(loc.ref_index, ref) @ prior if loc.ref_index != ref else prior
+            if loc.success and not confirmed and c.fuse_vo_prior and prior_cov is not None:
                 T_fused, cov = fuse(loc.T_ref_cam, loc.covariance, T_prior, prior_cov)
                 loc = replace(loc, T_ref_cam=T_fused, covariance=cov)
         elif start_hint:
@@ -282,9 +287,7 @@ class RepeatPipeline:
                     relocalized, self._lost = True, False
                     self._held.clear()
 
-        self._gated = None
-        if loc is not None and not localized and self._strong_beyond_gate(loc):
-            self._gated = (loc.ref_index, loc.T_ref_cam)
+        self._gated = beyond_place if (beyond and not confirmed and not searched) else None
         if localized:
             assert loc is not None
             self._provisional = relocalized or (self._provisional and loc.inliers < c.search_confirm_inliers)
@@ -383,14 +386,21 @@ class RepeatPipeline:
         return PriorGate(c.prior_gate_m + c.prior_gate_per_m * (self._distance_on_vo_m + step_m), position_cov,
                          sigmas, min_inliers, c.localization_cov_scale if c.prior_gate_innovation else 0.0)
 
-    def _strong_beyond_gate(self, loc: Localization) -> bool:
-        """Rejected by the prior gate only, with ``confirm_beyond_gate_inliers`` (> 0) inliers."""
-        return loc.gated and loc.inliers >= self.config.confirm_beyond_gate_inliers > 0
+    def _strong_beyond_gate(self, loc: Localization, T_prior: NDArray[np.float64], gate: PriorGate | None) -> bool:
+        """A localization with ``confirm_beyond_gate_inliers`` (> 0) inliers rejected by the prior gate only, or
+        (``confirm_admitted``) admitted by its Mahalanobis widening beyond its radius from the prior ``T_prior``."""
+        c = self.config
+        if not loc.inliers >= c.confirm_beyond_gate_inliers > 0:
+            return False
+        if loc.gated:
+            return True
+        return (c.confirm_admitted and loc.success and gate is not None
+                and float(np.linalg.norm(loc.T_ref_cam[:3, 3] - T_prior[:3, 3])) > gate.radius_m)
 
     def _confirmed(self, loc: Localization, motion: NDArray[np.float64]) -> bool:
         """Whether a strong localization beyond the prior gate agrees with the previous frame's, also one, moved by
-        the VO ``motion`` between them."""
-        if self._gated is None or not self._strong_beyond_gate(loc):
+        the VO ``motion`` between them: then it replaces the prior (the prior is the wrong one)."""
+        if self._gated is None:
             return False
         ref, T_ref_cam = self._gated
         agree = self._offset_m(loc, (ref, T_ref_cam @ motion)) <= self.config.prior_gate_m

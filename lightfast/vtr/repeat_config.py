@@ -142,6 +142,12 @@ class RepeatConfig(Config):
         "following localization, 45-108 inliers, fail the gate until the 20 m failure; with no inlier minimum, "
         "consecutive wrong localizations of 13 inliers in the sand of repeat07 were accepted). 0: never.", min=0,
     )
+    confirm_admitted: bool = param(
+        True, description="The confirmation beyond the gate (confirm_beyond_gate_inliers) also counts localizations "
+        "the gate's Mahalanobis widening admitted beyond prior_gate_m: two consecutive strong ones agreeing with each "
+        "other far from the prior replace it instead of being fused with it (fused, the prior's overconfident "
+        "covariance kept a greyscale search place 2.5 m off for 25 frames; docs/vtr.md). False: refused ones only.",
+    )
     follow_path_on_vo_failure: bool = param(
         True, description="When the VO fails, move the prior along the taught path at the speed of the last frames' "
         "poses (the robot follows the path) instead of repeating the last VO motion (one wrong VO step before a dark "

@@ -823,6 +823,20 @@ def test_a_weak_place_is_held_over_a_frame_whose_search_finds_nothing(taught: Ta
         rp.close()
 
 
+def _off_along_z(search, z_std: float):
+    """``search`` (a whole-map search) with its place moved 1.5 m along the camera's optical axis and a covariance
+    of ``z_std`` (m) along it (5 cm across)."""
+    from dataclasses import replace as dc_replace
+
+    def off_search(*args, **kwargs):
+        loc = search(*args, **kwargs)
+        T = loc.T_ref_cam.copy()
+        T[:3, 3] += T[:3, 2] * 1.5
+        return dc_replace(loc, T_ref_cam=T, covariance=np.diag([0.05**2, 0.05**2, z_std**2] + [1e-6] * 3))
+
+    return off_search
+
+
 def test_a_search_place_off_along_the_optical_axis_is_mended_by_the_next_localization(taught: Taught,
                                                                                       repeat_features):
     """A place of the whole-map search found on far landmarks may be metres off along the optical axis, and its
@@ -830,8 +844,6 @@ def test_a_search_place_off_along_the_optical_axis_is_mended_by_the_next_localiz
     next frame's correct localization lies beyond the 0.5 m gate radius: with search_gate_sigmas (3) it is admitted
     and the pose mended; with 0, or when the place claims 5 cm along z, it is refused and the pose stays off
     (prior_gate_sigmas off, which would admit this strong localization as well)."""
-    from dataclasses import replace as dc_replace
-
     from lightfast.vtr.visual_odometry import VoResult
 
     camera = StereoCamera.from_projections(P_LEFT, P_RIGHT)
@@ -842,15 +854,7 @@ def test_a_search_place_off_along_the_optical_axis_is_mended_by_the_next_localiz
         rp = RepeatPipeline(taught.teach_map, _repeat_config("fused", search_accept_inliers=0,
                                                              search_gate_sigmas=sigmas, prior_gate_sigmas=0.0,
                                                              localization_cov_scale=1.0))
-        search = rp.localizer.search
-
-        def off_search(*args, search=search, z_std=z_std, **kwargs):
-            loc = search(*args, **kwargs)
-            T = loc.T_ref_cam.copy()
-            T[:3, 3] += T[:3, 2] * 1.5  # 1.5 m along the camera's optical axis
-            return dc_replace(loc, T_ref_cam=T, covariance=np.diag([0.05**2, 0.05**2, z_std**2] + [1e-6] * 3))
-
-        rp.localizer.search = off_search
+        rp.localizer.search = _off_along_z(rp.localizer.search, z_std)
         a = rp._localize_step(0, VoResult(np.eye(4), True, 0, 0, False, first=True), feats[12], camera, None)
         b = rp._localize_step(STAMP_STEP_NS, VoResult(motion, True, 50, 50, True), feats[13], camera, None)
         kf_z = taught.kf_pose[b.keyframe_index][2, 3]
@@ -881,18 +885,13 @@ def test_a_search_place_stays_open_until_a_strong_localization_confirms_it(taugh
             localization_cov_scale=1.0, search_confirm_inliers=confirm))
         search, localize = rp.localizer.search, rp.localizer.localize
 
-        def off_search(*args, search=search, **kwargs):
-            loc = search(*args, **kwargs)
-            T = loc.T_ref_cam.copy()
-            T[:3, 3] += T[:3, 2] * 1.5  # 1.5 m along the camera's optical axis
-            return dc_replace(loc, T_ref_cam=T, covariance=np.diag([0.05**2, 0.05**2, 1.5**2] + [1e-6] * 3))
 
         def weak_at_prior(features, camera, ref, window, prior, more=None, gate=None, localize=localize):
             loc = localize(features, camera, ref, window, prior, more, gate)
             return dc_replace(loc, T_ref_cam=prior.copy(), success=True, gated=False, inliers_per_source={"grey": 15},
                               covariance=weak_cov)
 
-        rp.localizer.search = off_search
+        rp.localizer.search = _off_along_z(search, 1.5)
         a = rp._localize_step(0, VoResult(np.eye(4), True, 0, 0, False, first=True), feats[12], camera, None)
         rp.localizer.localize = weak_at_prior
         b = rp._localize_step(STAMP_STEP_NS, steps[0], feats[13], camera, None)
@@ -902,6 +901,43 @@ def test_a_search_place_stays_open_until_a_strong_localization_confirms_it(taugh
         error_m = abs(kf_z + c.T_kf_cam[2, 3] - REPEAT_Z[14])
         assert a.relocalized and b.localized and c.localized == mended, (confirm, c)
         assert error_m < 0.1 if mended else error_m > 1.2, (confirm, error_m)
+        rp.close()
+
+
+def test_two_strong_localizations_admitted_far_from_the_prior_replace_it(taught: Taught, repeat_features):
+    """Fused with an overconfident wrong prior, correct localizations pull the pose back only part of the way. Planted:
+    the search's place 1.5 m too far along z (1.5 m standard deviation there, search_gate_sigmas off), and every
+    windowed localization 1.5 m uncertain along z as well. Frame 13's correct localization is admitted by the
+    Mahalanobis widening beyond the gate's radius and fused (halfway); frame 14's agrees with it after the VO motion
+    and is admitted beyond the radius too: with confirm_admitted it replaces the prior (pose mended), without it is
+    fused again and the pose stays more than 0.2 m off."""
+    from dataclasses import replace as dc_replace
+
+    from lightfast.vtr.visual_odometry import VoResult
+
+    camera = StereoCamera.from_projections(P_LEFT, P_RIGHT)
+    feats = repeat_features["teach"]
+    truth = [pose(REPEAT_X, z, REPEAT_YAW_DEG) for z in REPEAT_Z]
+    steps = [VoResult(np.linalg.inv(truth[i - 1]) @ truth[i], True, 50, 50, True) for i in (13, 14)]
+    wide = np.diag([0.05**2, 0.05**2, 1.5**2] + [1e-6] * 3)
+    for admitted, mended in ((True, True), (False, False)):
+        rp = RepeatPipeline(taught.teach_map, _repeat_config(
+            "fused", search_accept_inliers=0, search_gate_sigmas=0.0, prior_gate_sigmas=3.0,
+            localization_cov_scale=1.0, confirm_admitted=admitted))
+        search, localize = rp.localizer.search, rp.localizer.localize
+
+        def uncertain(*args, localize=localize, **kwargs):
+            return dc_replace(localize(*args, **kwargs), covariance=wide)
+
+        rp.localizer.search, rp.localizer.localize = _off_along_z(search, 1.5), uncertain
+        a = rp._localize_step(0, VoResult(np.eye(4), True, 0, 0, False, first=True), feats[12], camera, None)
+        b = rp._localize_step(STAMP_STEP_NS, steps[0], feats[13], camera, None)
+        c = rp._localize_step(2 * STAMP_STEP_NS, steps[1], feats[14], camera, None)
+        errors_m = [abs(taught.kf_pose[r.keyframe_index][2, 3] + r.T_kf_cam[2, 3] - REPEAT_Z[i])
+                    for r, i in ((b, 13), (c, 14))]
+        assert a.relocalized and b.localized and c.localized, (admitted, b, c)
+        assert 0.3 < errors_m[0] < 1.2, errors_m  # fused halfway
+        assert errors_m[1] < 0.1 if mended else errors_m[1] > 0.2, (admitted, errors_m)
         rp.close()
 
 
