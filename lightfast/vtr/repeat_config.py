@@ -145,8 +145,9 @@ class RepeatConfig(Config):
     confirm_admitted: bool = param(
         True, description="The confirmation beyond the gate (confirm_beyond_gate_inliers) also counts localizations "
         "the gate's Mahalanobis widening admitted beyond prior_gate_m: two consecutive strong ones agreeing with each "
-        "other far from the prior replace it instead of being fused with it (fused, the prior's overconfident "
-        "covariance kept a greyscale search place 2.5 m off for 25 frames; docs/vtr.md). False: refused ones only.",
+        "other far from the prior replace it instead of being fused with it (fused, they pulled a greyscale search "
+        "place 2.5 m off back by centimetres per frame for 25 frames: the prior's covariance shrank with each "
+        "fusion; docs/vtr.md). False: refused ones only.",
     )
     follow_path_on_vo_failure: bool = param(
         True, description="When the VO fails, move the prior along the taught path at the speed of the last frames' "
