@@ -184,7 +184,8 @@ class MapLocalizer:
             min_iterations=c.ransac_min_iterations, refine_top=c.ransac_refine_top,
             prior=None if T_ref_cam_prior is None or c.prior_consensus_sigmas <= 0 else PriorSupport(
                 T_ref_cam_prior, c.prior_consensus_sigmas, gate.position_cov if gate is not None else None,
-                gate.sigmas if gate is not None else 0.0, c.prior_consensus_min_inliers),
+                gate.sigmas if gate is not None else 0.0, c.prior_consensus_min_inliers,
+                c.prior_consensus_exclusive_inliers),
         )
         lab = np.concatenate(labels)
         counts = np.bincount(lab[est.inliers], minlength=len(sources))

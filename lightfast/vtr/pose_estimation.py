@@ -110,18 +110,25 @@ class PriorSupport:
     (``position_cov``, 3×3 in the reference frame; None: the prior is certain). Where the inliers cannot tell poses
     apart — a valley of poses along the viewing direction of far points, where counts ~1 m apart differ by less than
     their sampling noise — and the prior can, the pose it supports wins, not whichever one the sampling found
-    (maximum a posteriori: equal likelihoods, the prior decides)."""
+    (maximum a posteriori: equal likelihoods, the prior decides). With ``exclusive_inliers`` > 0 it also wins,
+    whatever the counts, when that many of its inliers are not the other's: two coherent, largely disjoint
+    consensus sets mean a second structure in the view (a shadow moved since the teach), and the prior decides."""
 
     T_ref_cur: NDArray[np.float64]
     margin_sigmas: float = 1.0
     position_cov: NDArray[np.float64] | None = None
     sigmas: float = 3.0
     min_inliers: int = 0
+    exclusive_inliers: int = 0
 
-    def keeps(self, count: int, other_count: int = 0, T_ref_other: NDArray[np.float64] | None = None) -> bool:
-        """Whether the prior's consensus of ``count`` inliers wins over another of ``other_count`` at
-        ``T_ref_other`` (None: no other)."""
-        if count < self.min_inliers or count < other_count - self.margin_sigmas * math.sqrt(other_count):
+    def keeps(self, count: int, other_count: int = 0, T_ref_other: NDArray[np.float64] | None = None,
+              exclusive: int = 0) -> bool:
+        """Whether the prior's consensus of ``count`` inliers, ``exclusive`` of them not the other's, wins over
+        another of ``other_count`` at ``T_ref_other`` (None: no other)."""
+        if count < self.min_inliers:
+            return False
+        disjoint = 0 < self.exclusive_inliers <= exclusive
+        if not disjoint and count < other_count - self.margin_sigmas * math.sqrt(other_count):
             return False
         if T_ref_other is None:
             return True
@@ -533,7 +540,8 @@ def estimate_pose_stereo(
         r, _, front = _stereo_residuals(_invert(prior.T_ref_cur), P, meas, K, fb)
         supported = _refine_consensus(ok & front & (np.sum(r * r, axis=1) <= thr2), P, meas, camera, thr2, ok,
                                       prior.T_ref_cur)
-        if supported is not None and prior.keeps(supported[0], *((best[0], best[2]) if best else ())):
+        if supported is not None and prior.keeps(
+                supported[0], *((best[0], best[2], int(np.count_nonzero(supported[3] & ~best[3]))) if best else ())):
             best = supported
     if best is None:
         return failed

@@ -98,6 +98,12 @@ class RepeatConfig(Config):
         "strength confirm_beyond_gate_inliers asks for): with a dozen inliers under low sun the counts say little "
         "and a prior left off by a weak localization would hold itself.", min=0,
     )
+    prior_consensus_exclusive_inliers: int = param(
+        30, description="With a prior, its own consensus is also kept (whatever the counts) when it holds at least "
+        "this many inliers the RANSAC's best does not explain: two coherent sets of matches, one at the prior, are "
+        "a second structure in the view (a shadow moved since the teach, a repeated pattern), not evidence that "
+        "the prior is off. 0: off.", min=0,
+    )
     max_position_std_m: float = param(
         0.5, description="A localization also needs its camera position constrained to this standard deviation "
         "(nominal 1 px noise), m: rejects poses resting on far points only.", min=0.0,

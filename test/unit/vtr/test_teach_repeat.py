@@ -393,6 +393,30 @@ def test_a_prior_keeps_its_consensus_unless_another_has_clearly_more_inliers():
             assert group_in.mean() > 0.95, (n_b, name, group_in.mean())
 
 
+
+def test_a_prior_with_a_coherent_consensus_of_its_own_is_kept_against_a_larger_disjoint_one():
+    """A shadow moved since the teach: 80 matches coherent with a pose 1 m off along the optical axis, disjoint from
+    the 40 at the prior (the ground the teach saw). By the counts the 80 win; with ``exclusive_inliers`` 30 the
+    prior's 40 of its own keep it, with 50 they do not, nor when the other pose lies within the prior's own
+    uncertainty."""
+    rng = np.random.default_rng(5)
+    camera = StereoCamera.from_projections(P_LEFT, P_RIGHT)
+    T_a, T_b = pose(0.1, 0.3, 1.0), pose(0.1, 1.3, 1.0)
+    groups = []
+    for T, n in ((T_a, 40), (T_b, 80)):
+        P_ref = np.c_[rng.uniform(-3, 3, n), rng.uniform(-1.5, 1, n), rng.uniform(3, 12, n)]
+        groups.append((P_ref, *_stereo_measurements(P_ref, T, rng, 0.3)))
+    P, uv, d = (np.concatenate(x) for x in zip(*groups, strict=True))
+    prior = T_a.copy()
+    prior[:3, 3] += [0.05, -0.03, 0.1]
+    for name, support, want in (
+            ("counts", PriorSupport(prior, 1.0), T_b),
+            ("30 of its own", PriorSupport(prior, 1.0, exclusive_inliers=30), T_a),
+            ("50 of its own", PriorSupport(prior, 1.0, exclusive_inliers=50), T_b),
+            ("uncertain prior", PriorSupport(prior, 1.0, np.eye(3), 3.0, exclusive_inliers=30), T_b)):
+        est = estimate_pose_stereo(P, uv, d, camera, threshold_px=3.0, min_inliers=6, prior=support)
+        assert est.success and np.linalg.norm(est.T_ref_cur[:3, 3] - want[:3, 3]) < 0.05, name
+
 def _few_correct_matches(rng: np.random.Generator, T_ref_cur: np.ndarray, n: int, n_in: int):
     """``n`` reference points and stereo measurements of which only the first ``n_in`` belong together; the others
     are keypoints (with their disparities) of other landmarks, as wrong matches."""
