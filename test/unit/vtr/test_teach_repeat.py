@@ -372,15 +372,10 @@ def test_a_prior_keeps_its_consensus_unless_another_has_clearly_more_inliers():
     rng = np.random.default_rng(11)
     camera = StereoCamera.from_projections(P_LEFT, P_RIGHT)
     T_a, T_b = pose(0.1, 0.3, 1.0), pose(0.1, 1.3, 1.0)
-
-    def group(T_ref_cur: np.ndarray, n: int):
-        P_ref = np.c_[rng.uniform(-3, 3, n), rng.uniform(-1.5, 1, n), rng.uniform(3, 12, n)]
-        return (P_ref, *_stereo_measurements(P_ref, T_ref_cur, rng, 0.3))
-
     prior = T_a.copy()
     prior[:3, 3] += [0.05, -0.03, 0.1]
     for n_b, kept in ((44, True), (80, False)):
-        P, uv, d = (np.concatenate(x) for x in zip(group(T_a, 40), group(T_b, n_b), strict=True))
+        P, uv, d = _consensus_groups(rng, (T_a, 40), (T_b, n_b))
         runs = {"none": {}, "prior": {"prior": PriorSupport(prior, 1.0)},
                 "uncertain prior": {"prior": PriorSupport(prior, 1.0, np.eye(3), 3.0)},  # 1 m std: cannot tell
                 "weak": {"prior": PriorSupport(prior, 1.0, min_inliers=60)},
@@ -393,6 +388,15 @@ def test_a_prior_keeps_its_consensus_unless_another_has_clearly_more_inliers():
             assert group_in.mean() > 0.95, (n_b, name, group_in.mean())
 
 
+def _consensus_groups(rng: np.random.Generator, *groups: tuple[np.ndarray, int]):
+    """Reference points 3-12 m away and their stereo measurements, concatenated: per ``(T_ref_cur, n)`` of
+    ``groups`` ``n`` points seen from ``T_ref_cur`` (consensus sets of distinct poses)."""
+    parts = []
+    for T_ref_cur, n in groups:
+        P_ref = np.c_[rng.uniform(-3, 3, n), rng.uniform(-1.5, 1, n), rng.uniform(3, 12, n)]
+        parts.append((P_ref, *_stereo_measurements(P_ref, T_ref_cur, rng, 0.3)))
+    return tuple(np.concatenate(x) for x in zip(*parts, strict=True))
+
 
 def test_a_prior_with_a_coherent_consensus_of_its_own_is_kept_against_a_larger_disjoint_one():
     """A shadow moved since the teach: 80 matches coherent with a pose 1 m off along the optical axis, disjoint from
@@ -402,11 +406,7 @@ def test_a_prior_with_a_coherent_consensus_of_its_own_is_kept_against_a_larger_d
     rng = np.random.default_rng(5)
     camera = StereoCamera.from_projections(P_LEFT, P_RIGHT)
     T_a, T_b = pose(0.1, 0.3, 1.0), pose(0.1, 1.3, 1.0)
-    groups = []
-    for T, n in ((T_a, 40), (T_b, 80)):
-        P_ref = np.c_[rng.uniform(-3, 3, n), rng.uniform(-1.5, 1, n), rng.uniform(3, 12, n)]
-        groups.append((P_ref, *_stereo_measurements(P_ref, T, rng, 0.3)))
-    P, uv, d = (np.concatenate(x) for x in zip(*groups, strict=True))
+    P, uv, d = _consensus_groups(rng, (T_a, 40), (T_b, 80))
     prior = T_a.copy()
     prior[:3, 3] += [0.05, -0.03, 0.1]
     for name, support, want in (
@@ -416,6 +416,7 @@ def test_a_prior_with_a_coherent_consensus_of_its_own_is_kept_against_a_larger_d
             ("uncertain prior", PriorSupport(prior, 1.0, np.eye(3), 3.0, exclusive_inliers=30), T_b)):
         est = estimate_pose_stereo(P, uv, d, camera, threshold_px=3.0, min_inliers=6, prior=support)
         assert est.success and np.linalg.norm(est.T_ref_cur[:3, 3] - want[:3, 3]) < 0.05, name
+
 
 def _few_correct_matches(rng: np.random.Generator, T_ref_cur: np.ndarray, n: int, n_in: int):
     """``n`` reference points and stereo measurements of which only the first ``n_in`` belong together; the others
@@ -908,7 +909,6 @@ def test_a_search_place_stays_open_until_a_strong_localization_confirms_it(taugh
             "fused", search_accept_inliers=0, search_gate_sigmas=3.0, prior_gate_sigmas=0.0,
             localization_cov_scale=1.0, search_confirm_inliers=confirm))
         search, localize = rp.localizer.search, rp.localizer.localize
-
 
         def weak_at_prior(features, camera, ref, window, prior, more=None, gate=None, localize=localize):
             loc = localize(features, camera, ref, window, prior, more, gate)
