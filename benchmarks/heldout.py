@@ -13,7 +13,8 @@ default configuration through ``lightfast eval racr`` / ``lightfast eval vtr`` (
 
 Generated data and per-run records go to ``--work`` (default ``$LIGHTFAST_OUT/heldout`` or ``/tmp/lightfast-heldout``);
 a run already recorded there with the same key (content, configuration, code) is not repeated.
-Usage: ``nice -n 10 .venv/bin/python benchmarks/heldout.py racr|vtr [--work DIR] [--jobs N]`` (hours of CPU).
+Usage: ``nice -n 10 .venv/bin/python benchmarks/heldout.py racr|vtr [--work DIR] [--jobs N]`` (hours of CPU);
+``benchmarks/heldout.py racr|vtr --pool SUMMARY... --out JSON`` judges the goals over rounds of the same method.
 """
 from __future__ import annotations
 
@@ -42,7 +43,7 @@ def _write(path: Path, text: str) -> None:
     from lightfast.io import write_text_atomic
 
     write_text_atomic(path, text)
-    print(f"wrote {path.relative_to(ROOT)}")
+    print(f"wrote {path.relative_to(ROOT) if path.is_relative_to(ROOT) else path}")
 
 
 def _write_json(path: Path, summary: dict[str, Any]) -> None:
@@ -185,14 +186,115 @@ def run_vtr(work: Path, jobs: int) -> None:
     _write(out_dir / "heldout_table.md", "\n".join(lines) + "\n")
 
 
+def pool_vtr(summaries: list[dict[str, Any]]) -> dict[str, Any]:
+    """Issue 19's VT&R goals over several rounds of the same code (a confirmation round is judged together with the
+    round it confirms, HELDOUT.md): strict autonomy by distance over every repeat of every route."""
+    per_route = {r: v for s in summaries for r, v in s["per_route"].items()}
+    if len(per_route) != sum(len(s["per_route"]) for s in summaries):
+        raise SystemExit("the rounds share a route: pool rounds with distinct routes")
+
+    def autonomy(mode: str, manual: str) -> float:
+        dist = sum(v[mode]["distance_m"] for v in per_route.values())
+        return 1.0 - sum(v[mode][manual] for v in per_route.values()) / dist if dist > 0 else math.nan
+
+    fused = autonomy("fused", "manual_strict_m")
+    false_accepts = sum(s["false_accepts_over_5m"] for s in summaries)
+    return {
+        "protocol": "benchmarks/results/HELDOUT.md", "routes": [int(r) for r in per_route],
+        "fused_strict_autonomy": fused, "grey_strict_autonomy": autonomy("grey", "manual_strict_m"),
+        "fused_published_autonomy": autonomy("fused", "manual_m"),
+        "grey_published_autonomy": autonomy("grey", "manual_m"), "false_accepts_over_5m": false_accepts,
+        "fused_manual_strict_m": sum(v["fused"]["manual_strict_m"] for v in per_route.values()),
+        "fused_distance_m": sum(v["fused"]["distance_m"] for v in per_route.values()),
+        "goals_met": {"fused_strict_autonomy >= 0.999": bool(fused >= 0.999),
+                      "false_accepts_over_5m == 0": false_accepts == 0},
+        "rounds": [{"routes": s["routes"], "fused_strict_autonomy": s["fused_strict_autonomy"],
+                    "grey_strict_autonomy": s["grey_strict_autonomy"],
+                    "false_accepts_over_5m": s["false_accepts_over_5m"], "date": s["machine"]["date"]}
+                   for s in summaries],
+    }
+
+
+def pool_racr(summaries: list[dict[str, Any]]) -> dict[str, Any]:
+    """Issue 19's rACR goals over several rounds of the same method, from each round's summary: success and
+    self-reported failures count runs; the pooled median AFD lies between the rounds' medians (the summaries keep
+    the failures' AFDs, not every run's), so both bounds are given and the goal is read on the upper one."""
+    def counts(key: str) -> tuple[int, list[dict[str, Any]]]:
+        ms = [s["per_method"][key] for s in summaries if key in s["per_method"]]
+        return sum(m["runs"] for m in ms), [f for m in ms for f in m["failures"]]
+
+    runs, fails = counts("racr/varied")
+    medians = [s["per_method"]["racr/varied"]["median_afd_px"] for s in summaries]
+    success = (runs - len(fails)) / runs if runs else math.nan
+    reported = sum(f["reported"] != "converged" for f in fails) / len(fails) if fails else math.nan
+    speedups = [s["parallel_speedup"] for s in summaries]
+    acr_runs, acr_fails = counts("acr/varied")
+    goals = {"success_rate >= 0.95": bool(success >= 0.95), "median_afd_px <= 1.5": bool(max(medians) <= 1.5),
+             "self_reported_failure_rate >= 0.9": bool(not fails or reported >= 0.9),
+             "parallel_speedup >= 1.4 in every round": bool(min(speedups) >= 1.4)}
+    return {
+        "protocol": "benchmarks/results/HELDOUT.md", "seeds": [x for s in summaries for x in s["seeds"]],
+        "scenes": sum(s["scenes"] for s in summaries), "runs": runs, "success_rate": success,
+        "median_afd_px": [min(medians), max(medians)], "self_reported_failure_rate": reported,
+        "parallel_speedup": min(speedups), "failures": fails,
+        "acr_success_rate": (acr_runs - len(acr_fails)) / acr_runs if acr_runs else math.nan,
+        "goals_met": goals,
+        "rounds": [{"seeds": s["seeds"], "success_rate": s["success_rate"], "median_afd_px": s["median_afd_px"],
+                    "self_reported_failure_rate": s["self_reported_failure_rate"],
+                    "parallel_speedup": s["parallel_speedup"], "date": s["machine"]["date"]} for s in summaries],
+    }
+
+
+def _pooled_table(what: str, pooled: dict[str, Any], names: list[str]) -> str:
+    lines = [f"# {'rACR' if what == 'racr' else 'VT&R'} held-out rounds pooled (benchmarks/results/HELDOUT.md)", "",
+             f"Made by `benchmarks/heldout.py {what} --pool` from {', '.join(f'`{n}`' for n in names)}.", ""]
+    if what == "vtr":
+        lines += ["| routes | fused strict | grey strict | search places accepted > 5 m off |", "|---|---:|---:|---:|"]
+        lines += [f"| {', '.join(map(str, r['routes']))} | {100 * r['fused_strict_autonomy']:.2f} % | "
+                  f"{100 * r['grey_strict_autonomy']:.2f} % | {r['false_accepts_over_5m']} |" for r in pooled["rounds"]]
+        lines.append(f"| **all {len(pooled['routes'])}** | **{100 * pooled['fused_strict_autonomy']:.2f} %** "
+                     f"({pooled['fused_manual_strict_m']:.1f} of {pooled['fused_distance_m']:.0f} m manual) | "
+                     f"{100 * pooled['grey_strict_autonomy']:.2f} % | {pooled['false_accepts_over_5m']} |")
+    else:
+        lines += ["| scene sets | success (AFD < 3 px) | median AFD [px] | failures it reported itself | "
+                  "parallel vs serial |", "|---|---:|---:|---:|---:|"]
+        lines += [f"| {', '.join(map(str, r['seeds']))} | {100 * r['success_rate']:.1f} % | "
+                  f"{r['median_afd_px']:.2f} | {_pct(r['self_reported_failure_rate'])} | "
+                  f"{r['parallel_speedup']:.2f}× |" for r in pooled["rounds"]]
+        lo, hi = pooled["median_afd_px"]
+        lines.append(f"| **all {pooled['scenes']} scenes** | **{100 * pooled['success_rate']:.1f} %** | "
+                     f"{lo:.2f}–{hi:.2f} | {_pct(pooled['self_reported_failure_rate'])} | "
+                     f"≥ {pooled['parallel_speedup']:.2f}× |")
+    lines += ["", "Goals (issue 19): " + "; ".join(f"{k}: {'met' if v else '**not met**'}"
+                                                   for k, v in pooled["goals_met"].items()) + "."]
+    return "\n".join(lines) + "\n"
+
+
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("what", choices=("racr", "vtr"))
     p.add_argument("--work", type=Path, default=Path(os.environ.get("LIGHTFAST_OUT", "/tmp")) / "lightfast-heldout",
                    help="generated scenes/routes and run records (not committed)")
     p.add_argument("--jobs", type=int, default=1, help="evaluation worker processes")
+    p.add_argument("--pool", type=Path, nargs="+", metavar="SUMMARY",
+                   help="instead of running: judge the goals over these rounds' heldout_*summary.json together "
+                        "(rounds of the same method)")
+    p.add_argument("--out", type=Path, help="with --pool: the pooled JSON (a markdown table is written beside it)")
     args = p.parse_args()
     sys.path.insert(0, str(ROOT))
+    if args.pool:
+        if args.out is None:
+            p.error("--pool needs --out")
+        try:
+            summaries = [json.loads(f.read_text()) for f in args.pool]
+            pooled = (pool_racr if args.what == "racr" else pool_vtr)(summaries)
+        except (OSError, ValueError, KeyError, TypeError) as e:
+            print(f"heldout.py: cannot pool {', '.join(map(str, args.pool))}: {e!r}", file=sys.stderr)
+            return 1
+        out = args.out.resolve()
+        _write_json(out, pooled)
+        _write(out.with_suffix(".md"), _pooled_table(args.what, pooled, [f.name for f in args.pool]))
+        return 0
     args.work.mkdir(parents=True, exist_ok=True)
     (run_racr if args.what == "racr" else run_vtr)(args.work, args.jobs)
     return 0
