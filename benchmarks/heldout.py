@@ -191,7 +191,7 @@ def pool_vtr(summaries: list[dict[str, Any]]) -> dict[str, Any]:
     round it confirms, HELDOUT.md): strict autonomy by distance over every repeat of every route."""
     per_route = {r: v for s in summaries for r, v in s["per_route"].items()}
     if len(per_route) != sum(len(s["per_route"]) for s in summaries):
-        raise SystemExit("the rounds share a route: pool rounds with distinct routes")
+        raise ValueError("the rounds share a route: pool rounds with distinct routes")
 
     def autonomy(mode: str, manual: str) -> float:
         dist = sum(v[mode]["distance_m"] for v in per_route.values())

@@ -48,7 +48,7 @@ def test_vtr_rounds_pool_by_distance_and_one_round_above_the_goal_does_not_carry
 
 
 def test_vtr_rounds_that_share_a_route_are_refused() -> None:
-    with pytest.raises(SystemExit, match="share a route"):
+    with pytest.raises(ValueError, match="share a route"):
         _heldout().pool_vtr([_vtr_round({"1": 0.8}), _vtr_round({"1": 0.8})])
 
 
