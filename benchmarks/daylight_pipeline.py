@@ -17,11 +17,12 @@ import datetime as dt
 import hashlib
 import json
 import os
-import platform
 import re
 import subprocess
 import sys
 from pathlib import Path
+
+from lightfast.eval.machine import describe_machine, machine_info
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "benchmarks" / "results"
@@ -48,7 +49,7 @@ def run(size: str, frames: int, sun_period: float, out: Path, mode: str, tracker
         "frames": re.search(r"frames (\d+), poses (\d+) .*f2m (\d+)", text),
         "acc": re.search(rf"RMSE {num} cm, tracking loss {num} %", text),
         "fps": re.search(rf"throughput {num} poses/s; .*median {num} ms, p95 {num} ms", text),
-        "sun": re.search(r"(\d+) chunks of (\d+) epochs", text),
+        "sun": re.search(r"(\d+) chunks of (\d+) epochs|(no B̂_sun chunk)", text),
         "cpu": re.search(r"CPU seconds from the first frame on: (.*)", text),
     }
     if not all(m.values()):
@@ -61,7 +62,7 @@ def run(size: str, frames: int, sun_period: float, out: Path, mode: str, tracker
         "frames": int(m["frames"][1]), "poses": int(m["frames"][2]),
         "f2m": int(m["frames"][3]), "rmse_cm": float(m["acc"][1]), "loss_percent": float(m["acc"][2]),
         "fps": float(m["fps"][1]), "latency_median_ms": float(m["fps"][2]), "latency_p95_ms": float(m["fps"][3]),
-        "sun_chunks": int(m["sun"][1]), "sun_epochs": int(m["sun"][2]), "stages": stages,
+        "sun_chunks": int(m["sun"][1] or 0), "sun_epochs": int(m["sun"][2] or 0), "stages": stages,
         "load_before": load_before, "load_after": _load(), "output": text,
     }
 
@@ -105,10 +106,10 @@ def markdown(runs: list[dict], in_process_rows: list[dict], args: argparse.Names
         f"are medians over the frames, from the nodes' status messages (wall time inside each node, so they include "
         f"waiting for the CPU). CPU = CPU time of every process from the first frame on, per frame.",
         "",
-        "| size | input fps | poses/s | f2m | latency median | latency p95 | f2f ms | rendering ms | "
+        "| size | input fps | run | poses/s | f2m | latency median | latency p95 | f2f ms | rendering ms | "
         "estimation ms | f2m ms | CPU ms/frame: tracker + relight + sun + recorder + player | sun chunks "
         "(epochs) during tracking | RMSE | loss |",
-        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|---:|---:|---:|",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|---:|---:|---:|",
     ]
     for r in runs:
         st = r["stages"]
@@ -121,7 +122,7 @@ def markdown(runs: list[dict], in_process_rows: list[dict], args: argparse.Names
         cpu = (f"{c.get('rgbd_tracker_node', 0):.0f} + {c.get('daylight_relight_node', 0):.0f} + "
                f"{c.get('sun_update_node', 0):.0f} + {c.get('recorder', 0):.0f} + {c.get('player', 0):.0f}")
         lines.append(
-            f"| {r['size']}{opts} | {r['input_fps']:.0f} | **{r['fps']:.1f}** | "
+            f"| {r['size']}{opts} | {r['input_fps']:.0f} | {r.get('repeat', 1)} | **{r['fps']:.1f}** | "
             f"{100 * r['f2m'] / max(r['poses'], 1):.0f} % "
             f"| {r['latency_median_ms']:.0f} ms | {r['latency_p95_ms']:.0f} ms | {ms('f2f')} | {ms('rendering')} | "
             f"{ms('estimation')} | {ms('f2m')} | {cpu} | {r['sun_chunks']} ({r['sun_epochs']}) | "
@@ -142,13 +143,13 @@ def markdown(runs: list[dict], in_process_rows: list[dict], args: argparse.Names
                      f"{q['wall_ms_per_frame']:.1f} |")
     lines += [
         "",
-        "Goal (issue): ≥ 30 poses/s at 320×240 and ≥ 15 at 640×480 on this 2-core machine. Paper (RTX 2080 Ti, "
+        "Goal (issue): ≥ 30 poses/s at 320×240 and ≥ 15 at 640×480 on a 2-core machine. Paper (RTX 2080 Ti, "
         "640×480): f2f 6.8–9.6 ms, f2m 5.8 ms, rendering 0.6–24.8 ms, estimation 15 ms, ≥ 30 fps at ≤ 20 patches "
         "per frame.",
         "",
         f"Load average before/after each run: {', '.join(r['load_before'] + '/' + r['load_after'] for r in runs)}. "
         f"Generated {dt.datetime.now(dt.UTC).isoformat(timespec='seconds')} by `benchmarks/daylight_pipeline.py` "
-        f"(Python {platform.python_version()}, {os.cpu_count()} cores).",
+        f"on {describe_machine()}.",
     ]
     return "\n".join(lines) + "\n"
 
@@ -164,6 +165,9 @@ def main() -> int:
                         "during the replay)")
     p.add_argument("--preroll", type=float, default=45.0,
                    help="seconds of /clock before the first frame, for the first sun epoch (default 45)")
+    p.add_argument("--repeats", type=int, default=2,
+                   help="runs per size and rate, each a row (default 2: a loaded 2-core machine varies from run "
+                        "to run)")
     p.add_argument("--mode", default="proposed")
     p.add_argument("--tracker-params", type=json.loads, default={},
                    help='per size, tracker parameters as "key=value ..." (JSON object, e.g. '
@@ -176,10 +180,12 @@ def main() -> int:
     for size in args.sizes:
         tracker_params = dict(kv.split("=", 1) for kv in args.tracker_params.get(size, "").split())
         for rate in args.rates.get(size, [1.0]):
-            r = run(size, args.frames, args.sun_period, args.out, args.mode, tracker_params, rate, args.preroll)
-            r["tracker_params"] = tracker_params
-            runs.append(r)
-            print(f"{size} at {30 * rate:.0f} fps: {r['fps']:.1f} poses/s, f2m {r['f2m']}/{r['poses']}", flush=True)
+            for repeat in range(1, args.repeats + 1):
+                r = run(size, args.frames, args.sun_period, args.out, args.mode, tracker_params, rate, args.preroll)
+                r.update(tracker_params=tracker_params, repeat=repeat)
+                runs.append(r)
+                print(f"{size} at {30 * rate:.0f} fps (run {repeat}): {r['fps']:.1f} poses/s, "
+                      f"f2m {r['f2m']}/{r['poses']}, latency median {r['latency_median_ms']:.0f} ms", flush=True)
         in_process_rows.append(in_process(size, args.frames, args.out, args.mode,
                                           {k: json.loads(v) for k, v in tracker_params.items()}))
     text = markdown(runs, in_process_rows, args)
@@ -188,7 +194,7 @@ def main() -> int:
     from lightfast.io import write_text_atomic
 
     write_text_atomic(RESULTS / "daylight_pipeline.md", text)
-    summary = {"runs": runs, "in_process": in_process_rows}
+    summary = {"runs": runs, "in_process": in_process_rows, "machine": machine_info()}
     write_text_atomic(RESULTS / "daylight_pipeline.json", json.dumps(summary, indent=1) + "\n")
     return 0
 

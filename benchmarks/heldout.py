@@ -22,7 +22,6 @@ import argparse
 import json
 import math
 import os
-import platform
 import sys
 import time
 from datetime import UTC, datetime
@@ -53,8 +52,9 @@ def _write_json(path: Path, summary: dict[str, Any]) -> None:
 
 
 def _machine() -> dict[str, Any]:
-    return {"date": datetime.now(UTC).isoformat(timespec="seconds"), "cpus": os.cpu_count(),
-            "python": platform.python_version()}
+    from lightfast.eval.machine import machine_info
+
+    return {"date": datetime.now(UTC).isoformat(timespec="seconds"), **machine_info()}
 
 
 def _rate(flags: list[bool]) -> float:

@@ -36,6 +36,7 @@ import open3d as o3d
 from numpy.typing import NDArray
 
 from lightfast.camera import PinholeCamera
+from lightfast.eval.machine import cpu_model
 from lightfast.geometry import make_transform
 from lightfast.raycast import RayCaster, RayHits
 
@@ -161,16 +162,6 @@ def compare(
     row = [name, f"{n:,}", f"{hit_ours.mean() * 100:.1f} %", f"{hit_mismatch}", f"{id_mismatch}",
            f"{dt.max(initial=0.0):.2e}", f"{duv[same_id].max(initial=0.0):.2e}", f"{occ_mismatch}"]
     return row, worst
-
-
-def cpu_model() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown CPU"
 
 
 def write_atomically(path: Path, text: str) -> None:

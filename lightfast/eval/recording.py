@@ -41,6 +41,8 @@ __all__ = ["PLAY_RESTART_S", "RecordingScore", "play_windows", "score_recording"
 
 #: Pose stamps going back by more than this start a new play of the bag, s.
 PLAY_RESTART_S = 1.0
+#: Below this share of poses refined by f2m, :meth:`RecordingScore.summary` says why frames kept their f2f pose.
+F2M_SHARE_HINT = 0.9
 STAGES = {"f2f": ("tracker", "f2f_ms"), "rendering": ("relight", "render_ms"),
           "estimation": ("relight", "estimate_ms"), "f2m": ("tracker", "f2m_ms")}
 
@@ -70,8 +72,12 @@ class RecordingScore:
             f"{np.percentile(lat, 95) if len(lat) else math.nan:.1f} ms",
             f"sun update streaming meanwhile: {self.sun_chunks} chunks of {self.sun_epochs} epochs" if self.sun_chunks
             else "sun update: no B̂_sun chunk published while the poses were (expected when its update period is "
-                 "longer than the recording)",
+                 "longer than the recording, or when the niced sun update gets no CPU while the nodes track)",
         ]
+        if self.poses and self.f2m < F2M_SHARE_HINT * self.poses:
+            lines.append(f"only {100 * self.f2m / self.poses:.0f} % refined by f2m: the other frames kept their f2f "
+                         "pose because their relit reference came too late (the nodes did not keep up with the input "
+                         "rate on this machine: a slower playback or smaller images help)")
         return "\n".join(lines) + "\n" + self.stage_table()
 
     def stage_table(self) -> str:

@@ -234,7 +234,8 @@ class RepeatPipeline:
                                           gate)
             T_prior = self.map.T_a_b(loc.ref_index, ref) @ prior if loc.ref_index != ref else prior
             beyond = self._strong_beyond_gate(loc, T_prior, gate)
-            beyond_place = (loc.ref_index, loc.T_ref_cam)  # before any fusion
+            if beyond:
+                beyond_place = (loc.ref_index, loc.T_ref_cam)  # before any fusion
             confirmed = beyond and self._confirmed(loc, motion)
             localized = loc.success or confirmed
             loc = self._scaled(loc)
