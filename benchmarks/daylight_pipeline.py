@@ -21,8 +21,12 @@ import re
 import subprocess
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from lightfast.eval.machine import describe_machine, machine_info
+
+if TYPE_CHECKING:
+    from lightfast.daylight.lighting_map import LightingMap
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "benchmarks" / "results"
@@ -67,20 +71,30 @@ def run(size: str, frames: int, sun_period: float, out: Path, mode: str, tracker
     }
 
 
+def demo_sim(out: Path, size: str, frames: int = 300) -> Path:
+    """The recording directory ``scripts/demo.sh`` makes under ``LIGHTFAST_OUT=out`` (default resolution)."""
+    return out / f"daylight-sim-{size}-{frames}-0.04"
+
+
+def demo_lighting_map(sim: Path) -> LightingMap:
+    """The lighting map ``scripts/demo.sh`` prepares for DS1 in ``sim`` (named as the script names it)."""
+    from lightfast.daylight.lighting_map import FORMAT_VERSION, LightingMap
+
+    scene_files = (sim / "scenes" / "DS1.map.ply").read_bytes() + (sim / "scenes" / "DS1.openings.yaml").read_bytes()
+    return LightingMap.load(sim / "maps" / f"DS1-0.1-v{FORMAT_VERSION}-{hashlib.sha1(scene_files).hexdigest()[:12]}")
+
+
 def in_process(size: str, frames: int, out: Path, mode: str, tracker_params: dict) -> dict:
     """The demo's recording and lighting map through ``run_sequence`` in this process: per-stage wall and CPU ms."""
     import time
 
     import numpy as np
 
-    from lightfast.daylight.lighting_map import FORMAT_VERSION, LightingMap
     from lightfast.eval.daylight import run_sequence
     from lightfast.tracking.pipeline import TrackerConfig
 
-    sim = out / f"daylight-sim-{size}-{frames}-0.04"
-    scene_files = (sim / "scenes" / "DS1.map.ply").read_bytes() + (sim / "scenes" / "DS1.openings.yaml").read_bytes()
-    digest = hashlib.sha1(scene_files).hexdigest()[:12]
-    lmap = LightingMap.load(sim / "maps" / f"DS1-0.1-v{FORMAT_VERSION}-{digest}")  # named as demo.sh names it
+    sim = demo_sim(out, size, frames)
+    lmap = demo_lighting_map(sim)
     cfg = TrackerConfig(**tracker_params)
     cpu0, wall0 = time.process_time(), time.monotonic()
     run = run_sequence(sim / "DS1.T6", lmap, mode, progress=False, tracker_config=cfg)

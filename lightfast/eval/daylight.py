@@ -48,6 +48,7 @@ from lightfast.daylight.relight import DaylightRelighter, RelightConfig
 from lightfast.daylight.sun import sun_position
 from lightfast.daylight.sun_update import sun_radiosity
 from lightfast.eval.cache import code_version, content_digest, run_key
+from lightfast.eval.daylight_inputs import InputChange
 from lightfast.eval.errors import DaylightEvalError
 from lightfast.geometry import rotation_angle_deg
 from lightfast.io import write_text_atomic
@@ -72,37 +73,6 @@ METHODS: dict[str, tuple[str, str, str]] = {
 PROTOCOL_VERSION = 3
 LOSS_TRANSLATION_M = 0.10
 LOSS_ROTATION_DEG = 10.0
-
-
-@dataclass(frozen=True)
-class InputChange:
-    """What-if changes to a recording's input, for measuring why methods do (not) separate (issue 21, point 5).
-    The defaults leave the recording as it is; ground truth and the protocol are unchanged.
-
-    * ``frame_step``: track every k-th frame only (30/k Hz: larger motion between frames, a constant-velocity
-      prediction that is k² times further off for the same acceleration);
-    * ``depth_hole_grow_px``: grow every region without depth by this many pixels (a depth camera that loses more
-      than the directly sunlit pixels, as structured light does near bright areas).
-    """
-
-    frame_step: int = 1
-    depth_hole_grow_px: int = 0
-
-    def __post_init__(self) -> None:
-        if not 1 <= self.frame_step <= 30 or not 0 <= self.depth_hole_grow_px <= 100:
-            raise DaylightEvalError(f"frame_step must be in [1, 30] and depth_hole_grow_px in [0, 100], got "
-                                    f"{self.frame_step} and {self.depth_hole_grow_px}")
-
-    def depth(self, depth_m: NDArray[np.float32]) -> NDArray[np.float32]:
-        """``depth_m`` with its holes grown (0 = no depth)."""
-        if self.depth_hole_grow_px == 0:
-            return depth_m
-        import cv2
-
-        hole = (~(np.isfinite(depth_m) & (depth_m > 0))).astype(np.uint8)
-        k = 2 * self.depth_hole_grow_px + 1
-        grown = cv2.dilate(hole, np.ones((k, k), np.uint8)).astype(bool)
-        return np.where(grown, np.float32(0.0), depth_m).astype(np.float32)
 
 
 @dataclass(frozen=True)
@@ -226,7 +196,7 @@ def run_sequence(seq_dir: Path, lmap: LightingMap, method: str, *, max_frames: i
     run = SequenceRun(seq_dir.name, method)
     tracker: RGBDTracker | None = None
     n = frames_total if max_frames is None else min(frames_total, max_frames)
-    it = recording_frames(files["bag"], step=inputs.frame_step, limit=n)
+    it = inputs.dropped(recording_frames(files["bag"], step=inputs.frame_step, limit=n))
     for stamp, rgb, depth_m, camera, T_gt in track(it, desc=f"{seq_dir.name} {method}",
                                                    total=-(-n // inputs.frame_step), enabled=progress, unit="frame"):
         depth_m = inputs.depth(depth_m)
@@ -493,7 +463,8 @@ def scene_of(seq_dir: Path) -> str:
 
 
 #: The code a run executes (its version is part of the run's key).
-CODE = ("daylight", "tracking", "eval/daylight.py", "bag", "geometry", "camera.py", "raycast.py", "config.py")
+CODE = ("daylight", "tracking", "eval/daylight.py", "eval/daylight_inputs.py", "bag", "geometry", "camera.py",
+        "raycast.py", "config.py")
 
 
 def _run_key(seq_dir: Path, method: str, map_meta: dict, max_frames: int | None,

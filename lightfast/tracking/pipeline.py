@@ -39,10 +39,12 @@ from lightfast.geometry import make_transform, quat_to_matrix, rotation_angle_de
 from lightfast.node_options import SensorInputOptions, StampOptions
 from lightfast.tracking.errors import TrackingError, TrackingInputError
 from lightfast.tracking.rgbd_odometry import (
+    MOTION_PRIOR_MAX_GAP_S,
     AlignResult,
     RGBDFrame,
     TrackingConfig,
     align_frames,
+    predict_motion,
     prepare_frame,
     repeated_input,
 )
@@ -106,8 +108,13 @@ class TrackerConfig(TrackingConfig, SensorInputOptions, StampOptions):
         min=0.0,
     )
     motion_prior: str = param("constant-velocity", description="Start of the f2f alignment: the previous frame's "
-                              "relative motion (constant velocity) or identity (none).",
-                              choices=("constant-velocity", "none"))
+                              "relative motion scaled to the time since the previous frame (constant-velocity: a "
+                              "frame after dropped frames is predicted over its whole interval), that motion as it "
+                              "is whatever the interval (last-motion, as DVO and ORB-SLAM predict), or identity "
+                              "(none).", choices=("constant-velocity", "last-motion", "none"))
+    motion_prior_max_gap_s: float = param(MOTION_PRIOR_MAX_GAP_S, description="A frame further than this from the "
+                                          "previous one (s) starts f2f at identity: no constant-velocity "
+                                          "prediction across a long gap.", min=0.0)
     max_pending: int = param(8, description="Frames kept waiting for their reference; older ones are finished "
                              "with the f2f pose (8: 0.27 s at 30 Hz, the reference's round trip through "
                              "daylight_relight_node with some slack).", min=1, max=100)
@@ -267,7 +274,8 @@ class RGBDTracker:
         self._last: tuple[int, RGBDFrame, NDArray[np.float64]] | None = None  # f2f target: stamp, frame, best pose
         self._last_stamp: int | None = None  # of the last frame (after _last's when its depth repeated _last's)
         self._T_start: NDArray[np.float64] | None = None
-        self._velocity = np.eye(4)  # T_prev_cur of the last f2f step (the constant-velocity prior)
+        self._velocity = np.eye(4)  # T_prev_cur of the last f2f step (the constant-velocity prior) ...
+        self._velocity_dt_ns = 0  # ... and its interval (0: none)
 
     @property
     def initialized(self) -> bool:
@@ -284,7 +292,7 @@ class RGBDTracker:
         if T.shape != (4, 4) or not np.all(np.isfinite(T)):
             raise TrackingInputError(f"reset pose must be a finite 4x4 matrix, got shape {T.shape}")
         self._pending.clear()
-        self._velocity = np.eye(4)
+        self._velocity, self._velocity_dt_ns = np.eye(4), 0
         if stamp_ns is not None and self._last is not None and self._last_stamp == int(stamp_ns):
             self._last = (self._last[0], self._last[1], T.copy())
             self._T_start = None  # (a frame whose depth repeated _last's has _last's pose)
@@ -308,7 +316,12 @@ class RGBDTracker:
             raise TrackingInputError(f"frame stamp {stamp} is not after the previous frame's {self._last_stamp}")
         cfg = self.config
         prev = None if self._last is None else self._last[:2]
-        init = self._velocity if cfg.motion_prior == "constant-velocity" else None
+        init = None
+        if cfg.motion_prior == "constant-velocity" and self._last_stamp is not None:
+            init = predict_motion(self._velocity, self._velocity_dt_ns, stamp - self._last_stamp,
+                                  cfg.motion_prior_max_gap_s)
+        elif cfg.motion_prior == "last-motion":
+            init = self._velocity
         return F2FJob(stamp, rgb, depth_m, self.camera, cfg, prev, init)
 
     def finish_coarse(self, job: F2FJob) -> CoarseEstimate:
@@ -332,7 +345,9 @@ class RGBDTracker:
                 T_rel = np.eye(4)
             else:
                 T_rel = res.T_target_source
-                self._velocity = T_rel if res.converged else np.eye(4)
+                assert self._last_stamp is not None
+                self._velocity, self._velocity_dt_ns = (T_rel, stamp - self._last_stamp) if res.converged else (
+                    np.eye(4), 0)
             T = self._last[2] @ T_rel
         self._pending[stamp] = _Pending(job.frame, T.copy(), T.copy(), prev_stamp, T_rel, res, job.seconds)
         if job.repeated != "depth":

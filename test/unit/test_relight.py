@@ -13,7 +13,7 @@ from lightfast.daylight.lighting_map import LightingMapConfig, prepare_lighting_
 from lightfast.daylight.relight import DaylightRelighter, RelightConfig, _apply_response, _response_table
 from lightfast.daylight.sun import FREIBURG
 from lightfast.daylight.sun_update import SunEpochAssembler, sun_radiosity
-from lightfast.geometry import compose, inverse, look_at, rotation_angle_deg, se3_exp
+from lightfast.geometry import compose, inverse, look_at, rotation_angle_deg, se3_exp, se3_log
 from lightfast.sim.validation_rooms import box_room_with_window
 from lightfast.tracking import align
 from lightfast.tracking.errors import TrackingError
@@ -266,6 +266,32 @@ def test_tracker_does_not_align_a_repeated_depth_image(room, true_crf):
     both_m = np.linalg.norm(compose(inverse(T2), c2.T_map_cam @ both.T_target_source)[:3, 3])
     assert error_m < 0.01 < both_m  # 6.5 mm against 2.6 cm
     assert [r.source for r in (tracker.skip_reference(s) for s in (0, 1, 2, 3))] == ["f2f"] * 4
+
+
+def test_f2f_prediction_spans_the_frames_a_busy_node_dropped(room, true_crf):
+    """A camera moving at constant velocity; the tracker gets frames 0, 1 and 2, then (a node that fell behind
+    dropped frames 3 and 4) frame 5: its f2f starts at the motion measured over one frame scaled to three frames,
+    not at one frame's motion, and tracks it. After a gap longer than ``motion_prior_max_gap_s`` it starts at
+    identity."""
+    lmap, sun = room
+    V = se3_exp([0.012, 0.0, 0.015, 0.0, 0.012, 0.0])  # per 1/30 s
+    poses = [T0]
+    for _ in range(5):
+        poses.append(compose(poses[-1], V))
+    frames = {i: live_frame(lmap, sun, true_crf, poses[i]) for i in (0, 1, 2, 5)}
+    period_ns = 1_000_000_000 // 30
+    tracker = RGBDTracker(CAMERA)
+    tracker.reset(T0)
+    for i in (0, 1, 2):
+        tracker.track_coarse(i * period_ns, *frames[i])
+    job = tracker.start_coarse(5 * period_ns, *frames[5])
+    np.testing.assert_allclose(se3_log(job.T_prev_cur_init), 3 * se3_log(V), atol=3e-3)  # T_prev_cur = V³
+    c5 = tracker.finish_coarse(job.run())
+    assert c5.f2f is not None and c5.f2f.converged
+    E = compose(inverse(poses[5]), c5.T_map_cam)
+    assert np.linalg.norm(E[:3, 3]) < 0.01 and rotation_angle_deg(E[:3, :3]) < 0.5
+    late = tracker.start_coarse(5 * period_ns + int(tracker.config.motion_prior_max_gap_s * 1e9) + 1, *frames[5])
+    np.testing.assert_array_equal(late.T_prev_cur_init, np.eye(4))
 
 
 def test_sun_epoch_assembler_swaps_only_complete_epochs():

@@ -10,11 +10,11 @@ import pytest
 from lightfast.camera import PinholeCamera
 from lightfast.config import ConfigError
 from lightfast.errors import LightfastError
-from lightfast.geometry import compose, inverse, rotation_angle_deg, se3_exp
+from lightfast.geometry import compose, inverse, rotation_angle_deg, se3_exp, se3_log
 from lightfast.tracking import TrackingConfig, align, ate_rmse, track_sequence
 from lightfast.tracking.errors import MetricsError, TrackingError
 from lightfast.tracking.pipeline import TrackerConfig
-from lightfast.tracking.rgbd_odometry import GEOMETRIC_TERMS
+from lightfast.tracking.rgbd_odometry import GEOMETRIC_TERMS, predict_motion
 
 FAST = TrackingConfig(resolution_scale=0.5)
 
@@ -371,3 +371,18 @@ def test_depth_difference_converges_where_a_nearest_pixel_depth_would_cycle():
     dt, dr = _errors(res.T_target_source, T_true)
     assert res.converged and res.iterations < sum(cfg.iterations) // 2
     assert dt < 3e-4 and dr < 0.02
+
+
+def test_constant_velocity_prediction_scales_with_the_interval() -> None:
+    """The same motion per second: the last motion itself over an equal interval (bit for bit, also when the stamps'
+    rounding to ns makes them differ by 1 ns), twice its twist over
+    twice the interval; identity without a measured interval or across a gap longer than the limit."""
+    T = se3_exp([0.01, -0.02, 0.005, 0.01, 0.0, -0.02])
+    ms = 1_000_000
+    np.testing.assert_array_equal(predict_motion(T, 33 * ms, 33 * ms), T)
+    np.testing.assert_array_equal(predict_motion(T, 33_333_333, 33_333_334), T)  # 30 Hz stamps rounded to ns
+    np.testing.assert_allclose(se3_log(predict_motion(T, 33 * ms, 66 * ms)), 2 * se3_log(T), atol=1e-12)
+    np.testing.assert_allclose(predict_motion(T, 66 * ms, 33 * ms) @ predict_motion(T, 66 * ms, 33 * ms), T,
+                               atol=1e-12)
+    for dt_last, dt in ((0, 33 * ms), (33 * ms, 0), (33 * ms, 600 * ms)):
+        np.testing.assert_array_equal(predict_motion(T, dt_last, dt, max_gap_s=0.5), np.eye(4))

@@ -32,10 +32,18 @@ from lightfast.tracking.rgbd_odometry.config import (
     TrackingConfig,
 )
 from lightfast.tracking.rgbd_odometry.pyramid import RGBDFrame, prepare_frame, repeated_images, repeated_input
-from lightfast.tracking.rgbd_odometry.solver import align, align_frames, track_sequence, warm_up
+from lightfast.tracking.rgbd_odometry.solver import (
+    MOTION_PRIOR_MAX_GAP_S,
+    align,
+    align_frames,
+    predict_motion,
+    track_sequence,
+    warm_up,
+)
 
 __all__ = [
     "GEOMETRIC_TERMS",
+    "MOTION_PRIOR_MAX_GAP_S",
     "TRACKING_MODES",
     "AlignResult",
     "RGBDFrame",
@@ -43,6 +51,7 @@ __all__ = [
     "TrackingConfig",
     "align",
     "align_frames",
+    "predict_motion",
     "prepare_frame",
     "repeated_images",
     "repeated_input",

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -32,9 +32,31 @@ from lightfast.tracking.rgbd_odometry.config import AlignResult, SequenceTrack, 
 from lightfast.tracking.rgbd_odometry.kernels import _Terms, linearize
 from lightfast.tracking.rgbd_odometry.pyramid import RGBDFrame, _Level, _prepare, prepare_frame, repeated_input
 
-__all__ = ["align", "align_frames", "track_sequence", "warm_up"]
+__all__ = ["MOTION_PRIOR_MAX_GAP_S", "align", "align_frames", "predict_motion", "track_sequence", "warm_up"]
 
 _MIN_CORRESPONDENCES = 50
+#: Frames further apart than this (s) get no constant-velocity prediction: the f2f alignment starts at identity.
+MOTION_PRIOR_MAX_GAP_S = 0.5
+_FRAME_PERIOD_NS = 1_000_000_000 // 30  # track_sequence without stamps: 30 Hz (7-Scenes, the paper's recordings)
+_SAME_INTERVAL_NS = 1_000  # intervals this close are equal (stamps of 30 Hz frames in ns differ by their rounding)
+
+
+def predict_motion(T_last: ArrayLike, dt_last_ns: int, dt_ns: int,
+                   max_gap_s: float = MOTION_PRIOR_MAX_GAP_S) -> NDArray[np.float64]:
+    """The constant-velocity prediction of the motion ``T_prev_cur`` over ``dt_ns`` from the last measured motion
+    ``T_last`` over ``dt_last_ns``: ``exp(dt / dt_last · log T_last)`` (the same twist per second), ``T_last``
+    itself when the two intervals are equal (to 1 µs). A frame that comes after frames were dropped is predicted over
+    its whole interval rather than one frame's; identity when either interval is not positive or ``dt_ns`` exceeds
+    ``max_gap_s`` (no prediction across a long gap). The trackers measure intervals from the previous frame received,
+    also when its depth repeated its predecessor's (not aligned): in 7-Scenes, where the Kinect's unsynchronised
+    streams repeat a depth image, the ground truth moves about one frame's motion from the frame before the repeat
+    to the one after it, not two."""
+    T = np.asarray(T_last, dtype=np.float64)
+    if abs(dt_ns - dt_last_ns) <= _SAME_INTERVAL_NS and dt_ns > 0:
+        return T.copy()
+    if dt_last_ns <= 0 or dt_ns <= 0 or dt_ns > max_gap_s * 1e9:
+        return np.eye(4)
+    return se3_exp(se3_log(T) * (dt_ns / dt_last_ns))
 
 
 def _align_pyramids(
@@ -180,10 +202,12 @@ def track_sequence(
     use_color: bool | None = None,
     use_depth: bool | None = None,
     constant_velocity: bool = True,
+    stamps_ns: Sequence[int] | None = None,
 ) -> SequenceTrack:
     """Frame-to-frame tracking (the f2f step of §III-D) over ``(rgb, depth_m)`` frames; each frame is aligned to
     its predecessor, starting from the previous relative motion (``constant_velocity``, as ``rgbd_tracker_node``
-    does; identity after an alignment that did not converge) or from identity, and the relative motions are
+    does: :func:`predict_motion` over the frames' ``stamps_ns``, default 1/30 s apart; identity after an alignment
+    that did not converge) or from identity, and the relative motions are
     chained from ``T_world_first``. A frame whose depth image repeats its predecessor's (:func:`repeated_input`) is
     not aligned (its ``results`` entry is None): it keeps the predecessor's pose, and the next frame is aligned to the
     predecessor; a frame whose colour image alone repeats is aligned by E_G alone. As ``rgbd_tracker_node`` does."""
@@ -194,22 +218,29 @@ def track_sequence(
     results: list[AlignResult | None] = []
     seconds: list[float] = []
     prev: RGBDFrame | None = None
-    velocity = np.eye(4)
+    last_stamp = 0  # of the previous frame, also when its depth repeated prev's
+    velocity, velocity_dt = np.eye(4), 0  # the last measured motion and its interval (ns)
     for i, (rgb, depth_m) in enumerate(frames):
         t0 = time.perf_counter()
+        stamp = i * _FRAME_PERIOD_NS if stamps_ns is None else int(stamps_ns[i])
         cur = _prepare(rgb, depth_m, camera, cfg, f"frame {i}")
         res = None
         if prev is not None:
             repeated = repeated_input(cur, prev)
             if repeated != "depth":
-                res = _align_pyramids(cur.levels, prev.levels, velocity, cfg, color and repeated != "colour", depth)
+                init = predict_motion(velocity, velocity_dt, stamp - last_stamp)
+                res = _align_pyramids(cur.levels, prev.levels, init, cfg, color and repeated != "colour", depth)
                 T_world = T_world @ res.T_target_source
-                velocity = res.T_target_source if constant_velocity and res.converged else np.eye(4)
+                if constant_velocity and res.converged:
+                    velocity, velocity_dt = res.T_target_source, stamp - last_stamp
+                else:
+                    velocity, velocity_dt = np.eye(4), 0
             results.append(res)
             seconds.append(time.perf_counter() - t0)
         poses.append(T_world.copy())
         if prev is None or res is not None:  # a repeated depth image leaves the predecessor the target
             prev = cur
+        last_stamp = stamp
     if not poses:
         raise TrackingInputError("track_sequence got no frames")
     return SequenceTrack(np.stack(poses), tuple(results), np.asarray(seconds))
