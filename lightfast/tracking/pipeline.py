@@ -10,8 +10,9 @@
    or :meth:`~RGBDTracker.skip_reference` when no reference comes (the f2f pose is final).
 
 The paper does not say where the f2f minimisation starts; here it starts at the previous frame's relative motion
-(a constant-velocity prior, ``motion_prior``), which widens the basin of convergence for fast hand-held rotations
-(measured on DS1.T1: identity fails from ~4.5°/frame, the prior tracks 8°/frame), or at identity.
+scaled to this frame's interval (a constant-velocity prior, ``motion_prior``; frames a busy node dropped lengthen
+the interval), which widens the basin of convergence for fast hand-held rotations (measured on DS1.T1: identity
+fails from ~4.5°/frame, the prior tracks 8°/frame), or at identity.
 
 The steps may interleave: frame k+1 can be coarse-tracked before frame k's reference arrives (a pipelined node).
 Each pending frame remembers its predecessor and relative motion, so when frame k is refined, the best-known poses
