@@ -22,7 +22,9 @@ import sys
 from pathlib import Path
 
 import numpy as np
+from numpy.typing import NDArray
 
+from lightfast.daylight.lighting_map import LightingMap
 from lightfast.eval.daylight import run_sequence, sequence_sun_radiosity
 from lightfast.eval.daylight_inputs import InputChange
 from lightfast.eval.machine import describe_machine
@@ -35,7 +37,7 @@ from daylight_pipeline import RESULTS, demo_lighting_map, demo_sim
 PRIORS = ("constant-velocity", "last-motion")
 
 
-def one_run(sim: Path, lmap, sun_B, prior: str, drop: float, seed: int) -> dict:  # type: ignore[no-untyped-def]
+def one_run(sim: Path, lmap: LightingMap, sun_B: NDArray[np.float32], prior: str, drop: float, seed: int) -> dict:
     run = run_sequence(sim / "DS1.T6", lmap, "proposed", progress=False, sun_B=sun_B,
                        tracker_config=TrackerConfig(motion_prior=prior), inputs=InputChange(drop_rate=drop,
                                                                                              drop_seed=seed))

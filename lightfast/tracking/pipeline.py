@@ -346,9 +346,9 @@ class RGBDTracker:
                 T_rel = np.eye(4)
             else:
                 T_rel = res.T_target_source
-                assert self._last_stamp is not None
-                self._velocity, self._velocity_dt_ns = (T_rel, stamp - self._last_stamp) if res.converged else (
-                    np.eye(4), 0)
+                self._velocity, self._velocity_dt_ns = np.eye(4), 0
+                if res.converged and self._last_stamp is not None:
+                    self._velocity, self._velocity_dt_ns = T_rel, stamp - self._last_stamp
             T = self._last[2] @ T_rel
         self._pending[stamp] = _Pending(job.frame, T.copy(), T.copy(), prev_stamp, T_rel, res, job.seconds)
         if job.repeated != "depth":
