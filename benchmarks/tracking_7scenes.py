@@ -219,7 +219,7 @@ def _o3d_legacy_track(frames: Frames, cam: PinholeCamera, skip_repeats: bool = F
 
 
 def _lf_track(frames: Frames, cam: PinholeCamera, cfg: TrackingConfig, constant_velocity: bool = True) -> Track:
-    track = track_sequence(frames, cam, config=cfg, constant_velocity=constant_velocity)
+    track = track_sequence(frames, cam, config=cfg, motion_prior="constant-velocity" if constant_velocity else "none")
     return Track(track.poses, 1000.0 * float(np.mean(track.seconds)),
                  sum(r is not None and not r.converged for r in track.results))
 

@@ -123,10 +123,12 @@ def pooled(runs: Sequence[SequenceRun]) -> dict[str, float]:
             "rmse_cm": 100.0 * float(np.sqrt(np.mean(err**2))) if len(err) else float("nan")}
 
 
-def recording_frames(bag_dir: Path, *, step: int = 1, limit: int | None = None) -> Iterator[
+def recording_frames(bag_dir: Path, *, step: int = 1, limit: int | None = None,
+                     kept: Callable[[int], bool] | None = None) -> Iterator[
         tuple[int, NDArray[np.uint8], NDArray[np.float32], PinholeCamera, NDArray[np.float64]]]:
     """(stamp_ns, rgb, depth_m, camera, T_map_cam of the truth) of every ``step``-th complete frame (paired by exact
-    stamp) of the first ``limit`` of a simulated recording; skipped frames are not converted, nor the bag read on."""
+    stamp) of the first ``limit`` of a simulated recording, of those only the ones ``kept(i)`` (asked in order, i
+    counting every ``step``-th frame) keeps; skipped frames are not converted, nor the bag read on."""
     from lightfast.ros.convert import camera_from_camera_info, image_to_numpy, pose_stamped_to_matrix
 
     if step < 1:
@@ -146,7 +148,7 @@ def recording_frames(bag_dir: Path, *, step: int = 1, limit: int | None = None) 
                 continue
             del parts[stamp]
             complete += 1
-            if (complete - 1) % step:
+            if (complete - 1) % step or (kept is not None and not kept((complete - 1) // step)):
                 continue
             d = image_to_numpy(p[DEPTH_TOPIC])
             yield (stamp, image_to_numpy(p[COLOR_TOPIC]),
@@ -196,7 +198,7 @@ def run_sequence(seq_dir: Path, lmap: LightingMap, method: str, *, max_frames: i
     run = SequenceRun(seq_dir.name, method)
     tracker: RGBDTracker | None = None
     n = frames_total if max_frames is None else min(frames_total, max_frames)
-    it = inputs.dropped(recording_frames(files["bag"], step=inputs.frame_step, limit=n))
+    it = recording_frames(files["bag"], step=inputs.frame_step, limit=n, kept=inputs.kept())
     for stamp, rgb, depth_m, camera, T_gt in track(it, desc=f"{seq_dir.name} {method}",
                                                    total=-(-n // inputs.frame_step), enabled=progress, unit="frame"):
         depth_m = inputs.depth(depth_m)

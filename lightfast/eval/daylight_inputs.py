@@ -2,9 +2,8 @@
 separate (issue 21, point 5) and how tracking holds up when a busy node drops frames."""
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -12,9 +11,6 @@ from numpy.typing import NDArray
 from lightfast.eval.errors import DaylightEvalError
 
 __all__ = ["InputChange"]
-
-_Frame = TypeVar("_Frame")
-
 
 @dataclass(frozen=True)
 class InputChange:
@@ -52,9 +48,8 @@ class InputChange:
         grown = cv2.dilate(hole, np.ones((k, k), np.uint8)).astype(bool)
         return np.where(grown, np.float32(0.0), depth_m).astype(np.float32)
 
-    def dropped(self, frames: Iterator[_Frame]) -> Iterator[_Frame]:
-        """``frames`` without the ones a busy node would have dropped (the first is always kept)."""
+    def kept(self) -> Callable[[int], bool]:
+        """Whether a busy node keeps the i-th frame offered (the first always; each other with ``1 - drop_rate``):
+        call the predicate once per frame, in order (it draws from ``drop_seed``'s stream as it goes)."""
         rng = np.random.default_rng(self.drop_seed)
-        for i, frame in enumerate(frames):
-            if i == 0 or self.drop_rate == 0.0 or rng.random() >= self.drop_rate:
-                yield frame
+        return lambda i: i == 0 or self.drop_rate == 0.0 or bool(rng.random() >= self.drop_rate)

@@ -41,11 +41,12 @@ from lightfast.node_options import SensorInputOptions, StampOptions
 from lightfast.tracking.errors import TrackingError, TrackingInputError
 from lightfast.tracking.rgbd_odometry import (
     MOTION_PRIOR_MAX_GAP_S,
+    MOTION_PRIORS,
     AlignResult,
+    MotionPrior,
     RGBDFrame,
     TrackingConfig,
     align_frames,
-    predict_motion,
     prepare_frame,
     repeated_input,
 )
@@ -112,7 +113,7 @@ class TrackerConfig(TrackingConfig, SensorInputOptions, StampOptions):
                               "relative motion scaled to the time since the previous frame (constant-velocity: a "
                               "frame after dropped frames is predicted over its whole interval), that motion as it "
                               "is whatever the interval (last-motion, as DVO and ORB-SLAM predict), or identity "
-                              "(none).", choices=("constant-velocity", "last-motion", "none"))
+                              "(none).", choices=MOTION_PRIORS)
     motion_prior_max_gap_s: float = param(MOTION_PRIOR_MAX_GAP_S, description="A frame further than this from the "
                                           "previous one (s) starts f2f at identity: no constant-velocity "
                                           "prediction across a long gap.", min=0.0)
@@ -275,8 +276,7 @@ class RGBDTracker:
         self._last: tuple[int, RGBDFrame, NDArray[np.float64]] | None = None  # f2f target: stamp, frame, best pose
         self._last_stamp: int | None = None  # of the last frame (after _last's when its depth repeated _last's)
         self._T_start: NDArray[np.float64] | None = None
-        self._velocity = np.eye(4)  # T_prev_cur of the last f2f step (the constant-velocity prior) ...
-        self._velocity_dt_ns = 0  # ... and its interval (0: none)
+        self._motion = MotionPrior(self.config.motion_prior, self.config.motion_prior_max_gap_s)  # f2f's start
 
     @property
     def initialized(self) -> bool:
@@ -293,7 +293,7 @@ class RGBDTracker:
         if T.shape != (4, 4) or not np.all(np.isfinite(T)):
             raise TrackingInputError(f"reset pose must be a finite 4x4 matrix, got shape {T.shape}")
         self._pending.clear()
-        self._velocity, self._velocity_dt_ns = np.eye(4), 0
+        self._motion.reset()
         if stamp_ns is not None and self._last is not None and self._last_stamp == int(stamp_ns):
             self._last = (self._last[0], self._last[1], T.copy())
             self._T_start = None  # (a frame whose depth repeated _last's has _last's pose)
@@ -315,15 +315,9 @@ class RGBDTracker:
         stamp = int(stamp_ns)
         if self._last_stamp is not None and stamp <= self._last_stamp:
             raise TrackingInputError(f"frame stamp {stamp} is not after the previous frame's {self._last_stamp}")
-        cfg = self.config
         prev = None if self._last is None else self._last[:2]
-        init = None
-        if cfg.motion_prior == "constant-velocity" and self._last_stamp is not None:
-            init = predict_motion(self._velocity, self._velocity_dt_ns, stamp - self._last_stamp,
-                                  cfg.motion_prior_max_gap_s)
-        elif cfg.motion_prior == "last-motion":
-            init = self._velocity
-        return F2FJob(stamp, rgb, depth_m, self.camera, cfg, prev, init)
+        init = None if self._last_stamp is None else self._motion.predict(stamp - self._last_stamp)
+        return F2FJob(stamp, rgb, depth_m, self.camera, self.config, prev, init)
 
     def finish_coarse(self, job: F2FJob) -> CoarseEstimate:
         """Add the frame of a job that has run: T≈ chains its f2f motion to the previous frame's pose as it is now
@@ -346,9 +340,8 @@ class RGBDTracker:
                 T_rel = np.eye(4)
             else:
                 T_rel = res.T_target_source
-                self._velocity, self._velocity_dt_ns = np.eye(4), 0
-                if res.converged and self._last_stamp is not None:
-                    self._velocity, self._velocity_dt_ns = T_rel, stamp - self._last_stamp
+                if self._last_stamp is not None:  # (always, with _last)
+                    self._motion.measured(T_rel, stamp - self._last_stamp, res.converged)
             T = self._last[2] @ T_rel
         self._pending[stamp] = _Pending(job.frame, T.copy(), T.copy(), prev_stamp, T_rel, res, job.seconds)
         if job.repeated != "depth":

@@ -141,3 +141,16 @@ def test_input_change_grows_depth_holes_and_checks_its_values() -> None:
         InputChange(frame_step=0)
     with pytest.raises(DaylightEvalError):
         InputChange(depth_hole_grow_px=-1)
+
+
+def test_input_change_drops_frames_at_its_rate_from_its_seed() -> None:
+    def kept(change: InputChange, n: int = 2000) -> list[bool]:
+        keep = change.kept()
+        return [keep(i) for i in range(n)]
+
+    assert all(kept(InputChange()))
+    a = kept(InputChange(drop_rate=0.4, drop_seed=1))
+    assert a[0] and 0.37 < 1 - np.mean(a[1:]) < 0.43  # the first frame always, then 40 % dropped
+    assert a == kept(InputChange(drop_rate=0.4, drop_seed=1)) != kept(InputChange(drop_rate=0.4, drop_seed=2))
+    with pytest.raises(DaylightEvalError):
+        InputChange(drop_rate=1.0)

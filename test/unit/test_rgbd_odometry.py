@@ -12,9 +12,9 @@ from lightfast.config import ConfigError
 from lightfast.errors import LightfastError
 from lightfast.geometry import compose, inverse, rotation_angle_deg, se3_exp, se3_log
 from lightfast.tracking import TrackingConfig, align, ate_rmse, track_sequence
-from lightfast.tracking.errors import MetricsError, TrackingError
+from lightfast.tracking.errors import MetricsError, TrackingError, TrackingInputError
 from lightfast.tracking.pipeline import TrackerConfig
-from lightfast.tracking.rgbd_odometry import GEOMETRIC_TERMS, predict_motion
+from lightfast.tracking.rgbd_odometry import GEOMETRIC_TERMS, MOTION_PRIORS, MotionPrior, predict_motion
 
 FAST = TrackingConfig(resolution_scale=0.5)
 
@@ -386,3 +386,23 @@ def test_constant_velocity_prediction_scales_with_the_interval() -> None:
                                atol=1e-12)
     for dt_last, dt in ((0, 33 * ms), (33 * ms, 0), (33 * ms, 600 * ms)):
         np.testing.assert_array_equal(predict_motion(T, dt_last, dt, max_gap_s=0.5), np.eye(4))
+
+
+def test_motion_prior_rules_forget_a_motion_that_did_not_converge() -> None:
+    """The three starts over a doubled interval; an alignment that did not converge, or a reset, leaves identity;
+    an unknown rule is refused."""
+    T = se3_exp([0.01, -0.02, 0.005, 0.01, 0.0, -0.02])
+    ms = 1_000_000
+    priors = {rule: MotionPrior(rule) for rule in MOTION_PRIORS}
+    for prior in priors.values():
+        np.testing.assert_array_equal(prior.predict(33 * ms), np.eye(4))  # nothing measured yet
+        prior.measured(T, 33 * ms, converged=True)
+    np.testing.assert_allclose(se3_log(priors["constant-velocity"].predict(66 * ms)), 2 * se3_log(T), atol=1e-12)
+    np.testing.assert_array_equal(priors["last-motion"].predict(66 * ms), T)
+    np.testing.assert_array_equal(priors["none"].predict(66 * ms), np.eye(4))
+    priors["constant-velocity"].measured(T, 33 * ms, converged=False)
+    priors["last-motion"].reset()
+    for prior in priors.values():
+        np.testing.assert_array_equal(prior.predict(33 * ms), np.eye(4))
+    with pytest.raises(TrackingInputError, match="motion prior"):
+        MotionPrior("constant-acceleration")

@@ -34,6 +34,8 @@ from lightfast.tracking.rgbd_odometry.config import (
 from lightfast.tracking.rgbd_odometry.pyramid import RGBDFrame, prepare_frame, repeated_images, repeated_input
 from lightfast.tracking.rgbd_odometry.solver import (
     MOTION_PRIOR_MAX_GAP_S,
+    MOTION_PRIORS,
+    MotionPrior,
     align,
     align_frames,
     predict_motion,
@@ -43,9 +45,11 @@ from lightfast.tracking.rgbd_odometry.solver import (
 
 __all__ = [
     "GEOMETRIC_TERMS",
+    "MOTION_PRIORS",
     "MOTION_PRIOR_MAX_GAP_S",
     "TRACKING_MODES",
     "AlignResult",
+    "MotionPrior",
     "RGBDFrame",
     "SequenceTrack",
     "TrackingConfig",

@@ -32,13 +32,16 @@ from lightfast.tracking.rgbd_odometry.config import AlignResult, SequenceTrack, 
 from lightfast.tracking.rgbd_odometry.kernels import _Terms, linearize
 from lightfast.tracking.rgbd_odometry.pyramid import RGBDFrame, _Level, _prepare, prepare_frame, repeated_input
 
-__all__ = ["MOTION_PRIOR_MAX_GAP_S", "align", "align_frames", "predict_motion", "track_sequence", "warm_up"]
+__all__ = ["MOTION_PRIORS", "MOTION_PRIOR_MAX_GAP_S", "MotionPrior", "align", "align_frames", "predict_motion",
+           "track_sequence", "warm_up"]
 
 _MIN_CORRESPONDENCES = 50
 #: Frames further apart than this (s) get no constant-velocity prediction: the f2f alignment starts at identity.
 MOTION_PRIOR_MAX_GAP_S = 0.5
 _FRAME_PERIOD_NS = 1_000_000_000 // 30  # track_sequence without stamps: 30 Hz (7-Scenes, the paper's recordings)
 _SAME_INTERVAL_NS = 1_000  # intervals this close are equal (stamps of 30 Hz frames in ns differ by their rounding)
+#: Starts of an f2f alignment (:class:`MotionPrior`).
+MOTION_PRIORS = ("constant-velocity", "last-motion", "none")
 
 
 def predict_motion(T_last: ArrayLike, dt_last_ns: int, dt_ns: int,
@@ -57,6 +60,39 @@ def predict_motion(T_last: ArrayLike, dt_last_ns: int, dt_ns: int,
     if dt_last_ns <= 0 or dt_ns <= 0 or dt_ns > max_gap_s * 1e9:
         return np.eye(4)
     return se3_exp(se3_log(T) * (dt_ns / dt_last_ns))
+
+
+class MotionPrior:
+    """The start of an f2f alignment from the last motion measured (§III-D does not say; the trackers' rule, kept in
+    one place for ``rgbd_tracker_node`` and :func:`track_sequence`): ``constant-velocity`` predicts over the frame's
+    interval (:func:`predict_motion`), ``last-motion`` repeats the last motion whatever the interval (as DVO and
+    ORB-SLAM predict), ``none`` starts at identity. An alignment that did not converge, or a reset, forgets the
+    motion: the next one starts at identity."""
+
+    def __init__(self, rule: str = "constant-velocity", max_gap_s: float = MOTION_PRIOR_MAX_GAP_S) -> None:
+        if rule not in MOTION_PRIORS:
+            raise TrackingInputError(f"motion prior must be one of {MOTION_PRIORS}, got {rule!r}")
+        self.rule, self.max_gap_s = rule, float(max_gap_s)
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the last motion."""
+        self._T_last, self._dt_last_ns = np.eye(4), 0
+
+    def predict(self, dt_ns: int) -> NDArray[np.float64]:
+        """The start ``T_prev_cur`` of the alignment of a frame ``dt_ns`` after the previous one."""
+        if self.rule == "last-motion":
+            return self._T_last.copy()
+        if self.rule == "none":
+            return np.eye(4)
+        return predict_motion(self._T_last, self._dt_last_ns, dt_ns, self.max_gap_s)
+
+    def measured(self, T_prev_cur: NDArray[np.float64], dt_ns: int, converged: bool) -> None:
+        """Record an alignment's motion over ``dt_ns``; one that did not converge is not a measurement."""
+        if converged:
+            self._T_last, self._dt_last_ns = np.asarray(T_prev_cur, dtype=np.float64), int(dt_ns)
+        else:
+            self.reset()
 
 
 def _align_pyramids(
@@ -201,13 +237,12 @@ def track_sequence(
     T_world_first: ArrayLike | None = None,
     use_color: bool | None = None,
     use_depth: bool | None = None,
-    constant_velocity: bool = True,
+    motion_prior: str = "constant-velocity",
     stamps_ns: Sequence[int] | None = None,
 ) -> SequenceTrack:
     """Frame-to-frame tracking (the f2f step of §III-D) over ``(rgb, depth_m)`` frames; each frame is aligned to
-    its predecessor, starting from the previous relative motion (``constant_velocity``, as ``rgbd_tracker_node``
-    does: :func:`predict_motion` over the frames' ``stamps_ns``, default 1/30 s apart; identity after an alignment
-    that did not converge) or from identity, and the relative motions are
+    its predecessor, starting where :class:`MotionPrior` ``motion_prior`` puts it over the frames' ``stamps_ns``
+    (default 1/30 s apart), as ``rgbd_tracker_node`` does, and the relative motions are
     chained from ``T_world_first``. A frame whose depth image repeats its predecessor's (:func:`repeated_input`) is
     not aligned (its ``results`` entry is None): it keeps the predecessor's pose, and the next frame is aligned to the
     predecessor; a frame whose colour image alone repeats is aligned by E_G alone. As ``rgbd_tracker_node`` does."""
@@ -219,7 +254,7 @@ def track_sequence(
     seconds: list[float] = []
     prev: RGBDFrame | None = None
     last_stamp = 0  # of the previous frame, also when its depth repeated prev's
-    velocity, velocity_dt = np.eye(4), 0  # the last measured motion and its interval (ns)
+    prior = MotionPrior(motion_prior)
     for i, (rgb, depth_m) in enumerate(frames):
         t0 = time.perf_counter()
         stamp = i * _FRAME_PERIOD_NS if stamps_ns is None else int(stamps_ns[i])
@@ -228,13 +263,10 @@ def track_sequence(
         if prev is not None:
             repeated = repeated_input(cur, prev)
             if repeated != "depth":
-                init = predict_motion(velocity, velocity_dt, stamp - last_stamp)
+                init = prior.predict(stamp - last_stamp)
                 res = _align_pyramids(cur.levels, prev.levels, init, cfg, color and repeated != "colour", depth)
                 T_world = T_world @ res.T_target_source
-                if constant_velocity and res.converged:
-                    velocity, velocity_dt = res.T_target_source, stamp - last_stamp
-                else:
-                    velocity, velocity_dt = np.eye(4), 0
+                prior.measured(res.T_target_source, stamp - last_stamp, res.converged)
             results.append(res)
             seconds.append(time.perf_counter() - t0)
         poses.append(T_world.copy())
