@@ -186,9 +186,12 @@ def method_configs(method: str, tracker_config: TrackerConfig | None = None) -> 
 
 def run_sequence(seq_dir: Path, lmap: LightingMap, method: str, *, max_frames: int | None = None,
                  progress: bool = True, sun_B: NDArray[np.float32] | None = None,
-                 tracker_config: TrackerConfig | None = None, inputs: InputChange = InputChange()) -> SequenceRun:
+                 tracker_config: TrackerConfig | None = None, inputs: InputChange = InputChange(),
+                 T_truth_start: NDArray[np.float64] | None = None, reset_on_loss: bool = True) -> SequenceRun:
     """Run one method over one recording with the §IV-C protocol (see the module docstring); ``inputs``: what-if
-    changes to the recording (:class:`InputChange`)."""
+    changes to the recording (:class:`InputChange`). Outside the protocol: the tracker starts at the first frame's
+    truth times ``T_truth_start`` (a wrong start pose), and with ``reset_on_loss`` False a lost frame is only
+    recorded (recovery is the tracker's own)."""
     tracker_cfg, relight_cfg = method_configs(method, tracker_config)
     files = sequence_files(seq_dir)
     info = json.loads(files["info"].read_text())
@@ -204,7 +207,7 @@ def run_sequence(seq_dir: Path, lmap: LightingMap, method: str, *, max_frames: i
         depth_m = inputs.depth(depth_m)
         if tracker is None:
             tracker = RGBDTracker(camera, config=tracker_cfg)
-            tracker.reset(T_gt)
+            tracker.reset(T_gt if T_truth_start is None else T_gt @ T_truth_start)
             if sun_B is None:
                 sun_B = sequence_sun_radiosity(seq_dir, lmap)
             relighter.set_sun_radiosity(sun_B, stamp)
@@ -215,7 +218,7 @@ def run_sequence(seq_dir: Path, lmap: LightingMap, method: str, *, max_frames: i
         t_err = float(np.linalg.norm(E[:3, 3]))
         r_err = float(rotation_angle_deg(E[:3, :3]))
         lost = t_err > LOSS_TRANSLATION_M or r_err > LOSS_ROTATION_DEG
-        if lost:
+        if lost and reset_on_loss:
             tracker.reset(T_gt, stamp_ns=stamp)
         s = {n_: tuple(float(v) for v in ref.scale(n_)) for n_ in ref.names}
         run.frames.append(FrameRecord(

@@ -18,6 +18,10 @@ The steps may interleave: frame k+1 can be coarse-tracked before frame k's refer
 Each pending frame remembers its predecessor and relative motion, so when frame k is refined, the best-known poses
 of the frames after it are re-chained from the refined pose.
 
+Not in the paper: an f2m correction of T≈ beyond ``max_f2m_correction_m`` / ``_deg`` is rejected, unless the last
+``f2m_confirm_frames`` such corrections agree in the map frame (once f2f has gone off, every later T≈ is off by the
+same transform, which f2m against the map undoes each time).
+
 Modes (the ablation of §IV-C): ``proposed`` and ``refl-f2m`` use E_C + w_G E_G in both steps (they differ in the
 reference the relight step renders), ``depth-only`` uses E_G alone in both, ``no-color-f2m`` E_C + E_G in f2f and
 E_G alone in f2m.
@@ -36,7 +40,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from lightfast.camera import PinholeCamera
 from lightfast.config import ConfigError, param
-from lightfast.geometry import make_transform, quat_to_matrix, rotation_angle_deg
+from lightfast.geometry import inverse, make_transform, quat_to_matrix, rotation_angle_deg
 from lightfast.node_options import SensorInputOptions, StampOptions
 from lightfast.tracking.errors import TrackingError, TrackingInputError
 from lightfast.tracking.rgbd_odometry import (
@@ -66,6 +70,10 @@ def f2m_rejection(result: AlignResult, config: TrackerConfig) -> str:
     if dt > config.max_f2m_correction_m or dr > config.max_f2m_correction_deg:
         return f"f2m correction too large ({dt:.3f} m, {dr:.1f} deg)"
     return ""
+
+
+def _within(T: NDArray[np.float64], max_m: float, max_deg: float) -> bool:
+    return float(np.linalg.norm(T[:3, 3])) <= max_m and float(rotation_angle_deg(T[:3, :3])) <= max_deg
 
 
 @dataclass(frozen=True)
@@ -121,9 +129,20 @@ class TrackerConfig(TrackingConfig, SensorInputOptions, StampOptions):
                              "with the f2f pose (8: 0.27 s at 30 Hz, the reference's round trip through "
                              "daylight_relight_node with some slack).", min=1, max=100)
     max_f2m_correction_m: float = param(0.10, description="An f2m correction of T≈ larger than this is rejected "
-                                        "(the f2f pose is kept), metres.", min=0.0)
+                                        "(the f2f pose is kept) unless f2m_confirm_frames agree on it, metres.",
+                                        min=0.0)
     max_f2m_correction_deg: float = param(10.0, description="An f2m rotation correction larger than this is "
                                           "rejected, degrees.", min=0.0)
+    f2m_confirm_frames: int = param(2, description="A converged f2m correction larger than max_f2m_correction_m "
+                                    "or _deg is rejected; once this many in a row agree (within "
+                                    "f2m_confirm_tolerance_m / _deg), the next frame's reference is rendered at the "
+                                    "pose they give, and if f2m against it needs no large correction the tracker "
+                                    "takes that pose: after f2f has drifted away, or from a wrong start pose, the map "
+                                    "is found again. 0 = a large correction is always rejected.", min=0, max=100)
+    f2m_confirm_tolerance_m: float = param(0.02, description="Consecutive large f2m corrections agree when their "
+                                           "map-frame corrections differ by less than this, metres.", min=0.0)
+    f2m_confirm_tolerance_deg: float = param(2.0, description="... and by less than this rotation, degrees.",
+                                             min=0.0)
 
     def check(self) -> None:
         super().check()
@@ -190,12 +209,13 @@ class TrackResult:
 @dataclass
 class _Pending:
     frame: RGBDFrame
-    T_coarse: NDArray[np.float64]  # T≈ as published (the reference is rendered there)
+    T_coarse: NDArray[np.float64]  # T≈ as published (the reference is rendered there; a probe's pose, see _probe)
     T_best: NDArray[np.float64]  # best-known pose, re-chained when a predecessor is refined
     prev_stamp: int | None
     T_prev_cur: NDArray[np.float64]
     f2f: AlignResult | None
     f2f_seconds: float
+    probe: bool = False  # T_coarse is T_best moved by the tracker's probe
 
 
 @dataclass(eq=False)
@@ -277,6 +297,8 @@ class RGBDTracker:
         self._last_stamp: int | None = None  # of the last frame (after _last's when its depth repeated _last's)
         self._T_start: NDArray[np.float64] | None = None
         self._motion = MotionPrior(self.config.motion_prior, self.config.motion_prior_max_gap_s)  # f2f's start
+        self._large: list[NDArray[np.float64]] = []  # map-frame corrections of the last f2m results too large
+        self._probe: NDArray[np.float64] | None = None  # the agreed one: new frames' T≈ are moved by it
 
     @property
     def initialized(self) -> bool:
@@ -294,6 +316,8 @@ class RGBDTracker:
             raise TrackingInputError(f"reset pose must be a finite 4x4 matrix, got shape {T.shape}")
         self._pending.clear()
         self._motion.reset()
+        self._large.clear()
+        self._probe = None
         if stamp_ns is not None and self._last is not None and self._last_stamp == int(stamp_ns):
             self._last = (self._last[0], self._last[1], T.copy())
             self._T_start = None  # (a frame whose depth repeated _last's has _last's pose)
@@ -343,11 +367,13 @@ class RGBDTracker:
                 if self._last_stamp is not None:  # (always, with _last)
                     self._motion.measured(T_rel, stamp - self._last_stamp, res.converged)
             T = self._last[2] @ T_rel
-        self._pending[stamp] = _Pending(job.frame, T.copy(), T.copy(), prev_stamp, T_rel, res, job.seconds)
+        T_coarse = T.copy() if self._probe is None else self._probe @ T  # a probe: the reference is rendered there
+        self._pending[stamp] = _Pending(job.frame, T_coarse, T.copy(), prev_stamp, T_rel, res, job.seconds,
+                                        self._probe is not None)
         if job.repeated != "depth":
             self._last = (stamp, job.frame, T.copy())
         self._last_stamp = stamp
-        return CoarseEstimate(stamp, T, res, job.seconds, job.repeated)
+        return CoarseEstimate(stamp, T_coarse.copy(), res, job.seconds, job.repeated)
 
     def expired(self) -> list[int]:
         """Stamps of pending frames beyond ``max_pending`` (oldest first): finish them with :meth:`skip_reference`."""
@@ -405,11 +431,46 @@ class RGBDTracker:
         res, seconds = job.result, {"f2m": job.seconds}
         if res is None:
             return self._finish(stamp, p.T_best, "f2f", "reference has no valid depth", None, seconds)
+        # the reference was rendered at T≈ as published; later re-chaining of T_best does not move it
+        T_f2m = p.T_coarse @ res.T_target_source
         rejected = f2m_rejection(res, self.config)
+        if p.probe and self._probe is not None:  # the first result against a reference rendered at the probe decides
+            self._probe = None
+            if rejected:
+                return self._finish(stamp, p.T_best, "f2f", f"{rejected}; a large correction not confirmed", res,
+                                    seconds)
+            # the whole track moves: the frames still pending and the f2f target too (also when this frame's depth
+            # repeated the target's, so that re-chaining from it would not reach the target)
+            D = T_f2m @ inverse(p.T_best)
+            for q in self._pending.values():
+                q.T_best = D @ q.T_best
+            if self._last is not None:
+                self._last = (self._last[0], self._last[1], D @ self._last[2])
+            return self._finish(stamp, T_f2m, "f2m", "large correction confirmed", res, seconds)
+        if rejected and res.converged:
+            if self._probe is None and self._agreed(T_f2m @ inverse(p.T_best)):
+                self._probe = self._large[-1]
+                self._large.clear()
+        else:
+            self._large.clear()
         if rejected:
             return self._finish(stamp, p.T_best, "f2f", rejected, res, seconds)
-        # the reference was rendered at T≈ as published; later re-chaining of T_best does not move it
-        return self._finish(stamp, p.T_coarse @ res.T_target_source, "f2m", "", res, seconds)
+        return self._finish(stamp, T_f2m, "f2m", "", res, seconds)
+
+    def _agreed(self, correction: NDArray[np.float64]) -> bool:
+        """Add a large f2m correction (``T_f2m T_best⁻¹``, map frame) to the run of consecutive ones; True when the
+        last ``f2m_confirm_frames`` agree. If f2f went off at one frame and tracks on, every later frame's best pose
+        is off by the same map-frame transform, which each f2m result undoes; but f2m from a pose that far off can
+        settle on the same wrong answer frame after frame (measured: 34 cm off, three frames agreeing), so an agreed
+        correction is only a probe until a reference rendered there confirms it."""
+        cfg = self.config
+        if cfg.f2m_confirm_frames == 0:
+            return False
+        if not all(_within(inverse(c) @ correction, cfg.f2m_confirm_tolerance_m, cfg.f2m_confirm_tolerance_deg)
+                   for c in self._large):
+            self._large.clear()
+        self._large.append(correction)
+        return len(self._large) >= cfg.f2m_confirm_frames
 
     def skip_reference(self, stamp_ns: int, reason: str = "no reference") -> TrackResult:
         """Finish a pending frame without f2m: its (re-chained) f2f pose is final."""

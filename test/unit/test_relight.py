@@ -15,7 +15,7 @@ from lightfast.daylight.sun import FREIBURG
 from lightfast.daylight.sun_update import SunEpochAssembler, sun_radiosity
 from lightfast.geometry import compose, inverse, look_at, rotation_angle_deg, se3_exp, se3_log
 from lightfast.sim.validation_rooms import box_room_with_window
-from lightfast.tracking import align
+from lightfast.tracking import AlignResult, align
 from lightfast.tracking.errors import TrackingError
 from lightfast.tracking.pipeline import RGBDTracker, TrackerConfig
 from test.unit.test_brightness import S_TRUE
@@ -308,3 +308,69 @@ def test_sun_epoch_assembler_swaps_only_complete_epochs():
         a.add(9, np.array([10]), B[:1])
     with pytest.raises(ValueError, match="finite"):
         a.add(9, np.array([0]), np.full((1, 3), np.nan))
+
+
+def _track_from_wrong_start(lmap, sun, crf, config, ref_offsets=None, frames=4):
+    """Track a camera moving from T0 with the tracker started 12 cm off; references rendered at T≈ (or at T≈ moved
+    by ``ref_offsets[i]``, a planted inconsistent reference). Returns the final results."""
+    V = se3_exp([0.004, 0.0, 0.005, 0.0, 0.004, 0.0])
+    relighter = ready_relighter(lmap, sun, crf)
+    tracker = RGBDTracker(CAMERA, config=config)
+    tracker.reset(compose(T0, se3_exp([0.12, 0.0, 0.0, 0.0, 0.0, 0.0])))
+    T, out = T0, []
+    for i in range(frames):
+        rgb, depth = live_frame(lmap, sun, crf, T)
+        stamp = i * 33_333_333
+        T_ref = tracker.track_coarse(stamp, rgb, depth).T_map_cam
+        if ref_offsets is not None:
+            T_ref = compose(T_ref, se3_exp(ref_offsets[i]))
+        ref = relighter.step(stamp, rgb, T_ref, CAMERA)
+        r = tracker.refine(stamp, ref.color, ref.depth_m)
+        out.append((r, np.linalg.norm(compose(inverse(T), r.T_map_cam)[:3, 3])))
+        T = compose(T, V)
+    return out
+
+
+def test_large_f2m_corrections_that_agree_bring_the_pose_back(room, true_crf):
+    """Started 12 cm off (a wrong start pose, or f2f gone off once): each frame's f2m against the reference rendered
+    at T≈ finds the true pose, a correction beyond max_f2m_correction_m. One alone is rejected; three in a row that
+    agree are accepted (f2m_confirm_frames) and the pose is back within 5 mm; with 0 the tracker stays 12 cm off for
+    good. Large corrections that disagree (references planted 4 cm up and down in turn) are never accepted."""
+    lmap, sun = room
+    out = _track_from_wrong_start(lmap, sun, true_crf, TrackerConfig())
+    assert [r.source for r, _ in out] == ["f2f", "f2f", "f2m", "f2m"]
+    assert out[0][0].reason.startswith("f2m correction too large") and out[2][0].reason == "large correction confirmed"
+    assert out[1][1] > 0.1 and out[2][1] < 0.005 and out[3][1] < 0.005
+    never = _track_from_wrong_start(lmap, sun, true_crf, TrackerConfig(f2m_confirm_frames=0))
+    assert all(r.source == "f2f" and err > 0.1 for r, err in never)
+    sides = [[0.0, 0.04 * (-1) ** i, 0.0, 0.0, 0.0, 0.0] for i in range(5)]
+    planted = _track_from_wrong_start(lmap, sun, true_crf, TrackerConfig(), ref_offsets=sides, frames=5)
+    assert all(r.source == "f2f" and err > 0.1 for r, err in planted)
+
+
+def test_agreed_large_corrections_are_a_probe_that_a_reference_rendered_there_must_confirm(room, true_crf):
+    """The rule's states with planted f2m results (a still camera: repeated frames, so T_best stays T0): two large
+    corrections that agree make the next frame's T≈ the pose they give (a probe); a large correction against that
+    reference drops the probe (the frame keeps its f2f pose, T≈ goes back); a small one confirms it."""
+    lmap, sun = room
+    rgb, depth = live_frame(lmap, sun, true_crf, T0)
+    tracker = RGBDTracker(CAMERA)
+    tracker.reset(T0)
+    C = se3_exp([0.12, 0.0, 0.0, 0.0, 0.0, 0.0])  # T_ref_cur of f2m: 12 cm, beyond max_f2m_correction_m
+    results = []
+    for i, T_ref_cur in enumerate([C, C, C, C, C, np.eye(4)]):
+        coarse = tracker.track_coarse(i, rgb, depth)
+        job = tracker.start_refine(i, rgb, depth)
+        job.result = AlignResult(T_ref_cur, True, 5, 0.8, 1e-3)
+        results.append((coarse.T_map_cam, tracker.finish_refine(job)))
+    probe = T0 @ C
+    for i in (0, 1, 3, 4):  # rejected; after 1 (and 4) the two agree
+        np.testing.assert_array_equal(results[i][0], T0)
+        assert results[i][1].source == "f2f" and "too large" in results[i][1].reason
+    np.testing.assert_allclose(results[2][0], probe, atol=1e-12)  # the probe, not confirmed
+    assert results[2][1].source == "f2f" and results[2][1].reason.endswith("a large correction not confirmed")
+    np.testing.assert_array_equal(results[2][1].T_map_cam, T0)
+    np.testing.assert_allclose(results[5][0], probe, atol=1e-12)  # the probe again, confirmed
+    assert results[5][1].source == "f2m" and results[5][1].reason == "large correction confirmed"
+    np.testing.assert_allclose(results[5][1].T_map_cam, probe, atol=1e-12)
+    assert np.linalg.norm(tracker.track_coarse(6, rgb, depth).T_map_cam - probe) < 1e-12  # the track goes on there
