@@ -57,7 +57,7 @@ from lightfast.topics import COLOR_INFO_TOPIC, COLOR_TOPIC, DEPTH_TOPIC, GT_POSE
 from lightfast.tracking.pipeline import RGBDTracker, TrackerConfig
 
 __all__ = ["METHODS", "FrameRecord", "InputChange", "SequenceRun", "evaluate_daylight", "method_configs",
-           "pooled", "recording_frames", "run_sequence", "scene_of", "sequence_files"]
+           "pooled", "recording_frames", "run_sequence", "scene_lighting_map", "scene_of", "sequence_files"]
 
 log = logging.getLogger(__name__)
 
@@ -237,8 +237,8 @@ def run_sequence(seq_dir: Path, lmap: LightingMap, method: str, *, max_frames: i
 # the whole evaluation
 
 
-def _lighting_map(scene: str, sim_dir: Path, maps_dir: Path, progress: bool,
-                  config: LightingMapConfig | None = None) -> LightingMap:
+def scene_lighting_map(scene: str, sim_dir: Path, maps_dir: Path, progress: bool,
+                       config: LightingMapConfig | None = None) -> LightingMap:
     """The scene's lighting map, prepared once into ``maps_dir/<scene>`` (reused while the mesh is unchanged)."""
     from lightfast.daylight.errors import LightingMapVersionError
     from lightfast.daylight.lighting_map import prepare_lighting_map
@@ -419,7 +419,7 @@ def evaluate_daylight(sim_dir: Path, out_dir: Path, *, methods: Sequence[str] = 
         meta_path = maps_dir / scene / "metadata.json"
         current = meta_path.exists() and json.loads(meta_path.read_text()).get("version") == MAP_FORMAT_VERSION
         if not current:  # prepare once (or again, if an older lightfast made it) before the workers load it
-            _lighting_map(scene, sim_dir, maps_dir, progress, map_config)
+            scene_lighting_map(scene, sim_dir, maps_dir, progress, map_config)
         map_meta[scene] = json.loads((maps_dir / scene / "metadata.json").read_text())
     runs: list[SequenceRun] = []
     todo = []
@@ -566,7 +566,7 @@ def _cached_map(scene: str, sim_dir: Path, maps_dir: Path, map_config: dict | No
         _MAPS.clear()
         _SUNS.clear()
         cfg = None if map_config is None else LightingMapConfig(**map_config)
-        _MAPS[scene] = _lighting_map(scene, sim_dir, maps_dir, False, cfg)
+        _MAPS[scene] = scene_lighting_map(scene, sim_dir, maps_dir, False, cfg)
     return _MAPS[scene]
 
 

@@ -159,11 +159,11 @@ def test_input_change_drops_frames_at_its_rate_from_its_seed() -> None:
 def test_a_run_from_a_wrong_start_without_resets(sim_dir: Path, tmp_path: Path) -> None:
     """run_sequence outside the protocol: started 15 cm off the truth and never reset, the default tracker brings the
     pose back by agreeing large f2m corrections (f2m_confirm_frames); rejecting them, it stays lost throughout."""
-    from lightfast.eval.daylight import _lighting_map, run_sequence
+    from lightfast.eval.daylight import run_sequence, scene_lighting_map
     from lightfast.geometry import make_transform
     from lightfast.tracking.pipeline import TrackerConfig
 
-    lmap = _lighting_map("DS1", sim_dir, tmp_path / "maps", False, MAP)
+    lmap = scene_lighting_map("DS1", sim_dir, tmp_path / "maps", False, MAP)
     T_off = make_transform(np.eye(3), [0.15, 0.0, 0.0])
     runs = {n: run_sequence(sim_dir / "DS1.T6", lmap, "proposed", progress=False, T_truth_start=T_off,
                             reset_on_loss=False, tracker_config=TrackerConfig(f2m_confirm_frames=n)) for n in (2, 0)}
