@@ -18,9 +18,10 @@ The steps may interleave: frame k+1 can be coarse-tracked before frame k's refer
 Each pending frame remembers its predecessor and relative motion, so when frame k is refined, the best-known poses
 of the frames after it are re-chained from the refined pose.
 
-Not in the paper: an f2m correction of T≈ beyond ``max_f2m_correction_m`` / ``_deg`` is rejected, unless the last
-``f2m_confirm_frames`` such corrections agree in the map frame (once f2f has gone off, every later T≈ is off by the
-same transform, which f2m against the map undoes each time).
+Not in the paper: an f2m correction of T≈ beyond ``max_f2m_correction_m`` / ``_deg`` is rejected. Once
+``f2m_confirm_frames`` such corrections in a row agree in the map frame (after f2f has gone off, every later T≈ is
+off by the same transform, which f2m against the map undoes each time), the next T≈ is moved by it (a probe: the
+reference is rendered there), and the track moves there if f2m against that reference needs no large correction.
 
 Modes (the ablation of §IV-C): ``proposed`` and ``refl-f2m`` use E_C + w_G E_G in both steps (they differ in the
 reference the relight step renders), ``depth-only`` uses E_G alone in both, ``no-color-f2m`` E_C + E_G in f2f and
@@ -141,7 +142,8 @@ class TrackerConfig(TrackingConfig, SensorInputOptions, StampOptions):
                                     "is found again. 0 = a large correction is always rejected.", min=0, max=100)
     f2m_confirm_tolerance_m: float = param(0.02, description="Consecutive large f2m corrections agree when their "
                                            "map-frame corrections differ by less than this, metres.", min=0.0)
-    f2m_confirm_tolerance_deg: float = param(2.0, description="... and by less than this rotation, degrees.",
+    f2m_confirm_tolerance_deg: float = param(2.0, description="Consecutive large f2m corrections agree when their "
+                                             "map-frame corrections differ by less than this rotation, degrees.",
                                              min=0.0)
 
     def check(self) -> None:
@@ -434,19 +436,20 @@ class RGBDTracker:
         # the reference was rendered at T≈ as published; later re-chaining of T_best does not move it
         T_f2m = p.T_coarse @ res.T_target_source
         rejected = f2m_rejection(res, self.config)
-        if p.probe and self._probe is not None:  # the first result against a reference rendered at the probe decides
-            self._probe = None
+        if p.probe:  # against a reference rendered where agreeing large corrections put the pose
+            self._probe = None  # one answer decides
             if rejected:
                 return self._finish(stamp, p.T_best, "f2f", f"{rejected}; a large correction not confirmed", res,
                                     seconds)
-            # the whole track moves: the frames still pending and the f2f target too (also when this frame's depth
-            # repeated the target's, so that re-chaining from it would not reach the target)
             D = T_f2m @ inverse(p.T_best)
-            for q in self._pending.values():
-                q.T_best = D @ q.T_best
-            if self._last is not None:
-                self._last = (self._last[0], self._last[1], D @ self._last[2])
-            return self._finish(stamp, T_f2m, "f2m", "large correction confirmed", res, seconds)
+            if not _within(D, self.config.max_f2m_correction_m, self.config.max_f2m_correction_deg):
+                # the whole track moves: the frames still pending and the f2f target too (also when this frame's
+                # depth repeated the target's, so that re-chaining from it would not reach the target)
+                for q in self._pending.values():
+                    q.T_best = D @ q.T_best
+                if self._last is not None:
+                    self._last = (self._last[0], self._last[1], D @ self._last[2])
+                return self._finish(stamp, T_f2m, "f2m", "large correction confirmed", res, seconds)
         if rejected and res.converged:
             if self._probe is None and self._agreed(T_f2m @ inverse(p.T_best)):
                 self._probe = self._large[-1]
@@ -461,8 +464,8 @@ class RGBDTracker:
         """Add a large f2m correction (``T_f2m T_best⁻¹``, map frame) to the run of consecutive ones; True when the
         last ``f2m_confirm_frames`` agree. If f2f went off at one frame and tracks on, every later frame's best pose
         is off by the same map-frame transform, which each f2m result undoes; but f2m from a pose that far off can
-        settle on the same wrong answer frame after frame (measured: 34 cm off, three frames agreeing), so an agreed
-        correction is only a probe until a reference rendered there confirms it."""
+        settle on the same wrong answer frame after frame, so an agreed correction is only a probe until f2m against
+        a reference rendered there confirms it."""
         cfg = self.config
         if cfg.f2m_confirm_frames == 0:
             return False

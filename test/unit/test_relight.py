@@ -374,3 +374,31 @@ def test_agreed_large_corrections_are_a_probe_that_a_reference_rendered_there_mu
     assert results[5][1].source == "f2m" and results[5][1].reason == "large correction confirmed"
     np.testing.assert_allclose(results[5][1].T_map_cam, probe, atol=1e-12)
     assert np.linalg.norm(tracker.track_coarse(6, rgb, depth).T_map_cam - probe) < 1e-12  # the track goes on there
+
+
+def test_a_probe_confirmed_once_moves_the_frames_pending_behind_it(room, true_crf):
+    """Pipelined: frames 2 and 3 are coarse-tracked at the probe before either reference is aligned. Frame 2's f2m
+    confirms it and the whole track moves (frame 3's best pose too); frame 3's f2m against its reference, rendered at
+    the probe as well, is then an ordinary small correction."""
+    lmap, sun = room
+    rgb, depth = live_frame(lmap, sun, true_crf, T0)
+    tracker = RGBDTracker(CAMERA)
+    tracker.reset(T0)
+    C = se3_exp([0.12, 0.0, 0.0, 0.0, 0.0, 0.0])
+
+    def refine(stamp: int, T_ref_cur: np.ndarray):
+        job = tracker.start_refine(stamp, rgb, depth)
+        job.result = AlignResult(T_ref_cur, True, 5, 0.8, 1e-3)
+        return tracker.finish_refine(job)
+
+    for i in (0, 1):
+        tracker.track_coarse(i, rgb, depth)
+        assert refine(i, C).source == "f2f"
+    probe = T0 @ C
+    for i in (2, 3):
+        np.testing.assert_allclose(tracker.track_coarse(i, rgb, depth).T_map_cam, probe, atol=1e-12)
+    r2 = refine(2, np.eye(4))
+    assert r2.source == "f2m" and r2.reason == "large correction confirmed"
+    r3 = refine(3, se3_exp([0.002, 0.0, 0.0, 0.0, 0.0, 0.0]))
+    assert r3.source == "f2m" and r3.reason == ""
+    np.testing.assert_allclose(r3.T_map_cam, probe @ se3_exp([0.002, 0.0, 0.0, 0.0, 0.0, 0.0]), atol=1e-12)
