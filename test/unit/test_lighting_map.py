@@ -203,17 +203,17 @@ def test_prepare_cli(tmp_path: Path) -> None:
 def test_the_evaluation_prepares_an_outdated_map_again(tmp_path: Path) -> None:
     """`lightfast eval daylight` keeps its maps in maps_dir/<scene>: one made by an older lightfast (format
     version) is prepared again instead of stopping the evaluation."""
-    from lightfast.eval.daylight import _lighting_map
+    from lightfast.eval.daylight import scene_lighting_map
 
     scenes = tmp_path / "sim" / "scenes"
     scenes.mkdir(parents=True)
     save_ply(closed_box(n=3), scenes / "S.map.ply")
     FREIBURG.to_yaml(scenes / "S.site.yaml")
     maps = tmp_path / "maps"
-    first = _lighting_map("S", tmp_path / "sim", maps, False, CONFIG)
+    first = scene_lighting_map("S", tmp_path / "sim", maps, False, CONFIG)
     meta = json.loads((maps / "S" / "metadata.json").read_text())
     meta["version"] = 1
     (maps / "S" / "metadata.json").write_text(json.dumps(meta))
-    again = _lighting_map("S", tmp_path / "sim", maps, False, CONFIG)
+    again = scene_lighting_map("S", tmp_path / "sim", maps, False, CONFIG)
     assert json.loads((maps / "S" / "metadata.json").read_text())["version"] == FORMAT_VERSION
     np.testing.assert_allclose(again.sky_radiosity, first.sky_radiosity)
