@@ -25,7 +25,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from lightfast.daylight.lighting_map import LightingMap
-from lightfast.eval.daylight import run_sequence, sequence_sun_radiosity
+from lightfast.eval.daylight import pooled, run_sequence, sequence_sun_radiosity
 from lightfast.eval.daylight_inputs import InputChange
 from lightfast.eval.machine import describe_machine
 from lightfast.io import write_text_atomic
@@ -41,10 +41,8 @@ def one_run(sim: Path, lmap: LightingMap, sun_B: NDArray[np.float32], prior: str
     run = run_sequence(sim / "DS1.T6", lmap, "proposed", progress=False, sun_B=sun_B,
                        tracker_config=TrackerConfig(motion_prior=prior), inputs=InputChange(drop_rate=drop,
                                                                                              drop_seed=seed))
-    ok = [f.t_err_m for f in run.frames if not f.lost]
-    return {"prior": prior, "drop": drop, "seed": seed, "frames": len(run.frames),
-            "losses": sum(f.lost for f in run.frames), "f2m": sum(f.source == "f2m" for f in run.frames),
-            "rmse_cm": 100 * float(np.sqrt(np.mean(np.square(ok)))) if ok else float("nan"),
+    return {"prior": prior, "drop": drop, "seed": seed, "frames": len(run.frames), "losses": run.losses,
+            "f2m": sum(f.source == "f2m" for f in run.frames), "rmse_cm": pooled([run])["rmse_cm"],
             "T_est": [T.tolist() for T in run.T_est]}
 
 

@@ -54,7 +54,7 @@ def start_offset(seed: int, offset_m: float, rotation_deg: float) -> NDArray[np.
 def summary(run: SequenceRun) -> dict:
     lost = [i for i, f in enumerate(run.frames) if f.lost]
     back = None if lost and lost[-1] == len(run.frames) - 1 else (lost[-1] + 1 if lost else 0)  # lost no more
-    return {"frames": len(run.frames), "lost": sum(f.lost for f in run.frames), "back_at": back,
+    return {"frames": len(run.frames), "lost": run.losses, "back_at": back,
             "last_error_cm": 100 * run.frames[-1].t_err_m}
 
 
