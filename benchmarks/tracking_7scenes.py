@@ -30,7 +30,9 @@ time per frame includes the image pyramid / tensor preparation; lightfast's alig
 
 Sub-sequences: the frames cut into consecutive stretches of ``--subsequence`` frames (default 150; a shorter rest
 is dropped), each tracked on its own by Open3D's two APIs and lightfast's f2f at both resolutions; the table gives
-each stretch's ATE and their mean, the verdict whether lightfast's f2f is ahead of both Open3D APIs on that mean;
+each stretch's ATE and their mean, the verdict whether lightfast's f2f is ahead of both Open3D APIs on that mean,
+and each tracker's own error (the N-cornered hat, :func:`lightfast.tracking.own_errors`, over the pairwise ATEs and
+frame-to-frame motions of the four trackers and the ground truth: the part that is not shared with the others);
 on the raw frames and again on the registered colour (every method gets the same frames). lightfast does not align a
 frame whose depth image repeats its predecessor's and aligns one whose colour alone repeats by E_G only
 (:func:`lightfast.tracking.repeated_input`; 7-Scenes' unsynchronised Kinect streams repeat images); Open3D's rows
@@ -69,7 +71,7 @@ from lightfast.data.errors import DatasetError
 from lightfast.data.sevenscenes import SevenScenes, colour_registration, register_colour
 from lightfast.data.shared import shared_data_dir, shown_path
 from lightfast.io import write_text_atomic
-from lightfast.tracking import TrackingConfig, ate_rmse, repeated_images, track_sequence
+from lightfast.tracking import TrackingConfig, ate_rmse, motion_rmse, own_errors, repeated_images, track_sequence
 
 DATA_NAME = "7scenes_redkitchen_300"
 Frames = list[tuple[NDArray[np.uint8], NDArray[np.float64]]]
@@ -329,8 +331,10 @@ def evaluate_subsequences(seq: Sequence7, length: int, trackers: list[SubTracker
     at the same size (``ahead_of_both``; None without both Open3D rows)."""
     stretches = subsequences(len(seq.numbers), length)
     rows: list[dict[str, Any]] = []
+    poses: dict[tuple[str, str], list[NDArray[np.float64]]] = {}
     for name, full, fn in sub_trackers() if trackers is None else trackers:
         ate, rpe, failed, ms = [], [], [], []
+        size = _size(seq.cam if full else seq.small_cam)
         for ix in stretches:
             track = fn(seq, ix)
             gt = seq.gt[ix.start:ix.stop]
@@ -338,7 +342,7 @@ def evaluate_subsequences(seq: Sequence7, length: int, trackers: list[SubTracker
             rpe.append(_rpe(track.poses, gt)[0])
             failed.append(track.failed)
             ms.append(track.ms)
-        size = _size(seq.cam if full else seq.small_cam)
+            poses.setdefault((name, size), []).append(track.poses)
         rows.append({"method": name, "resolution": size, "ate_cm": ate, "rpe_mm": rpe, "failed": failed,
                      "mean_ate_cm": float(np.mean(ate)), "mean_rpe_mm": float(np.mean(rpe)),
                      "ms_per_frame": float(np.mean(ms))})
@@ -351,8 +355,44 @@ def evaluate_subsequences(seq: Sequence7, length: int, trackers: list[SubTracker
                 o3d_means: list[float] = [r["mean_ate_cm"] for r in rows
                                           if r["resolution"] == row["resolution"] and r["method"] in peers]
                 row[key] = bool(row["mean_ate_cm"] < min(o3d_means)) if len(o3d_means) == 2 else None
+    hats = _own_errors(seq, stretches, rows, poses)
     return {"length": length, "frames": [seq.numbers[0], seq.numbers[-1]],
-            "stretches": [[seq.numbers[ix.start], seq.numbers[ix.stop - 1]] for ix in stretches], "rows": rows}
+            "stretches": [[seq.numbers[ix.start], seq.numbers[ix.stop - 1]] for ix in stretches], "rows": rows,
+            "own_errors": hats}
+
+
+#: the trackers compared with each other and with the ground truth by the N-cornered hat (one row per method:
+#: the rows with lightfast's rule for repeated images share most of their errors with the rows without it)
+HAT_METHODS = (O3D_TENSOR, O3D_LEGACY, EQ7, DEPTH_DIFF)
+GROUND_TRUTH = "ground truth"
+
+
+def _own_errors(seq: Sequence7, stretches: list[range], rows: list[dict[str, Any]],
+                poses: dict[tuple[str, str], list[NDArray[np.float64]]]) -> list[dict[str, Any]]:
+    """Per resolution, :func:`lightfast.tracking.own_errors` of every stretch over the :data:`HAT_METHODS` rows and
+    the ground truth, on the ATE and on the frame-to-frame motions (:func:`lightfast.tracking.motion_rmse`); adds
+    ``own_cm`` / ``own_rpe_mm`` (per stretch) and their means to those rows and returns, per resolution, the ground
+    truth's share of both (its own error plus what all four trackers get wrong alike) and the fits' misfit."""
+    out = []
+    for size in dict.fromkeys(r["resolution"] for r in rows):
+        methods = [m for m in HAT_METHODS if (m, size) in poses]
+        if len(methods) < 2:
+            continue
+        sets = [{**{m: poses[(m, size)][k] for m in methods}, GROUND_TRUTH: seq.gt[ix.start:ix.stop]}
+                for k, ix in enumerate(stretches)]
+        ate_fits = [own_errors(t) for t in sets]
+        rpe_fits = [own_errors(t, distance=motion_rmse) for t in sets]
+        for r in rows:
+            if r["resolution"] == size and r["method"] in methods:
+                r["own_cm"] = [100.0 * f.own_m[r["method"]] for f in ate_fits]
+                r["mean_own_cm"] = float(np.mean(r["own_cm"]))
+                r["own_rpe_mm"] = [1000.0 * f.own_m[r["method"]] for f in rpe_fits]
+                r["rpe_rmse_mm"] = [1000.0 * motion_rmse(p, t[GROUND_TRUTH])
+                                    for p, t in zip(poses[(r["method"], size)], sets, strict=True)]
+        out.append({"resolution": size, "ground_truth_cm": [100.0 * f.own_m[GROUND_TRUTH] for f in ate_fits],
+                    "misfit_cm2": [1e4 * f.misfit_m2 for f in ate_fits],
+                    "ground_truth_rpe_mm": [1000.0 * f.own_m[GROUND_TRUTH] for f in rpe_fits]})
+    return out
 
 
 def _subsequence_lines(sub: dict[str, Any], colour: str) -> list[str]:
@@ -363,7 +403,22 @@ def _subsequence_lines(sub: dict[str, Any], colour: str) -> list[str]:
         if r.get("ahead_of_both_same_rule") is not None:
             out += "; " + ("ahead of both" if r["ahead_of_both_same_rule"] else "**not** ahead of both") + (
                 " when they get lightfast's rule for repeated images")
+        peers = [p for p in sub["rows"] if p["resolution"] == r["resolution"] and "mean_own_cm" in p
+                 and p["method"] in (O3D_TENSOR, O3D_LEGACY)]
+        if "mean_own_cm" in r and len(peers) == 2:
+            ahead = r["mean_own_cm"] < min(p["mean_own_cm"] for p in peers)
+            out += f"; own error {r['mean_own_cm']:.2f} cm, " + ("below" if ahead else "**not** below") + (
+                " both Open3D APIs' (" + ", ".join(f"{p['mean_own_cm']:.2f}" for p in peers) + ")")
         return out
+
+    def own(r: dict[str, Any]) -> str:
+        return f"{r['mean_own_cm']:.2f}" if "mean_own_cm" in r else "–"
+
+    hats = [f"{h['resolution']}: ATE " + ", ".join(f"{g:.2f}" for g in h["ground_truth_cm"]) + " cm (misfit "
+            + ", ".join(f"{m:.2f}" for m in h["misfit_cm2"]) + " cm²), frame-to-frame motion "
+            + ", ".join(f"{g:.2f}" for g in h["ground_truth_rpe_mm"]) + " mm" for h in sub.get("own_errors", [])]
+    per_frame = [f"{r['method']} at {r['resolution']} " + ", ".join(f"{a:.2f}" for a in r["rpe_rmse_mm"]) + " → "
+                 + ", ".join(f"{a:.2f}" for a in r["own_rpe_mm"]) for r in sub["rows"] if "own_rpe_mm" in r]
 
     verdicts = [verdict(r) for r in sub["rows"] if r.get("ahead_of_both") is not None]
 
@@ -380,14 +435,23 @@ def _subsequence_lines(sub: dict[str, Any], colour: str) -> list[str]:
         "alignment, mean over the stretches, mean of the stretches' median RPE [mm], failed alignments over all "
         "stretches (lightfast: `AlignResult.converged` false; Open3D legacy: `compute_rgbd_odometry` unsuccessful; "
         "Open3D tensor does not report it: –).",
+        "Own error [cm]: each tracker's share of its ATE, without the ground truth's: the N-cornered hat "
+        "(`lightfast.tracking.own_errors`) over the pairwise ATEs of the four trackers at one resolution (Open3D's "
+        "two APIs, lightfast's two forms) and the ground truth, per stretch, mean over the stretches. It assumes "
+        "independent errors; what all four trackers get wrong alike counts as the ground truth's.",
         "",
-        "| method | resolution | " + " | ".join(heads) + " | mean ATE [cm] | RPE [mm] | failed | ms/frame |",
-        "|---|---|" + "---:|" * (len(heads) + 4),
+        "| method | resolution | " + " | ".join(heads) + " | mean ATE [cm] | own error [cm] | RPE [mm] | failed "
+        "| ms/frame |",
+        "|---|---|" + "---:|" * (len(heads) + 5),
         *[f"| {r['method']} | {r['resolution']} | " + " | ".join(f"{a:.2f}" for a in r["ate_cm"])
-          + f" | **{r['mean_ate_cm']:.2f}** | {r['mean_rpe_mm']:.2f} | {failed(r)} | {r['ms_per_frame']:.1f} |"
-          for r in sub["rows"]],
+          + f" | **{r['mean_ate_cm']:.2f}** | {own(r)} | {r['mean_rpe_mm']:.2f} | {failed(r)} "
+          f"| {r['ms_per_frame']:.1f} |" for r in sub["rows"]],
         "",
         *[f"- {v}" for v in verdicts],
+        *([f"- The ground truth's share by the same fit (its own error and whatever all four trackers share), per "
+           f"stretch: {'; '.join(hats)}.",
+           "- Frame-to-frame motions, translation RMSE against the ground truth → each tracker's own by the same fit "
+           f"[mm], per stretch: {'; '.join(per_frame)}."] if hats else []),
     ]
 
 
@@ -508,7 +572,8 @@ def main(argv: list[str] | None = None) -> int:
     if rows:
         lines += [
             "ATE RMSE after rigid (Umeyama) alignment to the ground truth; RPE = median error of the frame-to-frame "
-            "motions (what one f2f alignment gets wrong; ATE adds how those errors accumulate);",
+            "motions (against this ground truth mostly an error all four trackers share: see the own errors of the "
+            "sub-sequence tables; ATE adds how the errors accumulate);",
             "ATE windows = mean ATE RMSE of the 100-frame stretches starting every 25 frames (each aligned on its "
             "own); drift = RMSE of the translation error of the motions over 30 frames (1 s, the TUM RPE). The "
             "whole-sequence ATE of chained odometry depends on how one run's small errors happen to add up: two "

@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 from lightfast.tracking.errors import TrackingError
-from lightfast.tracking.metrics import align_umeyama, ate_rmse
+from lightfast.tracking.metrics import OwnErrors, align_umeyama, ate_rmse, motion_rmse, own_errors
 from lightfast.tracking.rgbd_odometry import (
     AlignResult,
     RGBDFrame,
@@ -18,6 +18,7 @@ from lightfast.tracking.rgbd_odometry import (
 
 __all__ = [
     "AlignResult",
+    "OwnErrors",
     "RGBDFrame",
     "SequenceTrack",
     "TrackingConfig",
@@ -26,6 +27,8 @@ __all__ = [
     "align_frames",
     "align_umeyama",
     "ate_rmse",
+    "motion_rmse",
+    "own_errors",
     "prepare_frame",
     "repeated_images",
     "repeated_input",

@@ -386,7 +386,9 @@ class RGBDTracker:
                 seconds: dict[str, float]) -> TrackResult:
         p = self._pending.pop(stamp)
         p.T_best = T
-        # re-chain the later frames (and the last frame) from the final pose of this one
+        # re-chain the later frames (and the last frame) from the final pose of this one. A frame whose depth
+        # repeated its f2f target's does not move the target: its f2m paired a newer colour image with the target's
+        # depth, and the target has its own f2m (a confirmed probe moves the whole track in finish_refine).
         prev_T = {stamp: T}
         for s, q in self._pending.items():
             if q.prev_stamp in prev_T:

@@ -11,7 +11,7 @@ from lightfast.camera import PinholeCamera
 from lightfast.config import ConfigError
 from lightfast.errors import LightfastError
 from lightfast.geometry import compose, inverse, rotation_angle_deg, se3_exp, se3_log
-from lightfast.tracking import TrackingConfig, align, ate_rmse, track_sequence
+from lightfast.tracking import TrackingConfig, align, ate_rmse, motion_rmse, own_errors, track_sequence
 from lightfast.tracking.errors import MetricsError, TrackingError, TrackingInputError
 from lightfast.tracking.pipeline import TrackerConfig
 from lightfast.tracking.rgbd_odometry import GEOMETRIC_TERMS, MOTION_PRIORS, MotionPrior, predict_motion
@@ -228,6 +228,51 @@ def test_ate_rmse_is_invariant_to_rigid_alignment():
     assert 0.003 < ate_rmse(noisy, gt) < 0.02
     with pytest.raises(MetricsError):
         ate_rmse(est[:5], gt)
+
+
+def test_own_errors_recover_each_estimates_error_without_the_truth():
+    rng = np.random.default_rng(3)
+    n = 400
+    s = np.linspace(0.0, 2.0 * np.pi, n)
+    truth = np.stack([np.cos(s), np.sin(2 * s), 0.3 * s], axis=1)  # m
+    # independent drifts (random walks) of different sizes, each estimate also rigidly moved
+    est = {}
+    for name, step_m in (("a", 0.0004), ("b", 0.0008), ("c", 0.0012), ("d", 0.002)):
+        G = se3_exp(rng.normal(0.0, 0.3, size=6))
+        p = truth + np.cumsum(rng.normal(0.0, step_m, size=(n, 3)), axis=0)
+        est[name] = p @ G[:3, :3].T + G[:3, 3]
+    out = own_errors(est)
+    for name, p in est.items():
+        assert out.own_m[name] == pytest.approx(ate_rmse(p, truth), rel=0.2), name
+    assert out.pairwise_m[("a", "b")] == pytest.approx(ate_rmse(est["a"], est["b"]))
+    # an error the others share is counted as the odd one's own: "b", "c", "d" drift alike, "a" does not
+    common = np.cumsum(rng.normal(0.0, 0.002, size=(n, 3)), axis=0)
+    shared = {"a": est["a"], **{k: v + common for k, v in est.items() if k != "a"}}
+    moved = own_errors(shared)
+    assert moved.own_m["a"] > 2.0 * out.own_m["a"]
+    with pytest.raises(MetricsError):
+        own_errors({"a": truth, "b": truth})
+
+
+def test_own_errors_of_the_frame_to_frame_motions():
+    rng = np.random.default_rng(4)
+    n = 300
+    motions = [se3_exp(np.r_[rng.normal(0.0, 0.005, 3), rng.normal(0.0, 0.003, 3)]) for _ in range(n - 1)]
+
+    def chain(noise_m: float) -> np.ndarray:
+        poses = [np.eye(4)]
+        for M in motions:
+            poses.append(poses[-1] @ M @ se3_exp(np.r_[rng.normal(0.0, noise_m, 3), 0.0, 0.0, 0.0]))
+        return np.stack(poses)
+
+    truth = chain(0.0)
+    est = {name: chain(noise) for name, noise in (("a", 0.0005), ("b", 0.001), ("c", 0.002))}
+    out = own_errors(est, distance=motion_rmse)
+    for name, poses in est.items():
+        assert out.own_m[name] == pytest.approx(motion_rmse(poses, truth), rel=0.15), name
+    assert motion_rmse(truth, truth) < 1e-12
+    with pytest.raises(MetricsError):
+        motion_rmse(truth[:5], truth)
 
 
 def _reference_terms(src, tgt, T, cfg, use_color, use_depth):

@@ -61,9 +61,14 @@ def test_the_benchmark_runs_on_another_folder_numbered_from_500(sevenscenes_dir:
             assert len(row["ate_cm"]) == 2 and all(math.isfinite(a) and a < 5.0 for a in row["ate_cm"]), row
             lightfast = row["method"].startswith("lightfast")
             assert ("ahead_of_both" in row) == ("ahead_of_both_same_rule" in row) == lightfast
+            assert ("own_cm" in row) == (row["method"] in bench.HAT_METHODS)
+            assert all(0.0 <= a <= 5.0 for a in row.get("own_cm", [])), row
+        assert [h["resolution"] for h in sub["own_errors"]] == ["160×120", "80×60"]
+        assert all(len(h["ground_truth_cm"]) == 2 for h in sub["own_errors"])
     assert summary["subsequences_registered"]["colour"].startswith("colour registered (scale 0.")
     report = out.read_text()
     assert f"Frames {FIRST + 2}–{FIRST + 9} of `" in report and "## Sub-sequences of 4 frames" in report
+    assert "own error" in report and "The ground truth's share" in report
     with pytest.raises(SystemExit, match=r"holds 10 numbered 500\.\.509"):
         bench.main(["--data", str(data), "--first", "0", "--last", "299", "--output", str(out)])
 
