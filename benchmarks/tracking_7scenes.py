@@ -438,7 +438,8 @@ def _subsequence_lines(sub: dict[str, Any], colour: str) -> list[str]:
         "Own error [cm]: each tracker's share of its ATE, without the ground truth's: the N-cornered hat "
         "(`lightfast.tracking.own_errors`) over the pairwise ATEs of the four trackers at one resolution (Open3D's "
         "two APIs, lightfast's two forms) and the ground truth, per stretch, mean over the stretches. It assumes "
-        "independent errors; what all four trackers get wrong alike counts as the ground truth's.",
+        "independent errors; what all four trackers get wrong alike counts as the ground truth's; a stretch's 0 is the "
+        "fit's bound, where the pairwise ATEs are not those of independent errors (see the misfit below).",
         "",
         "| method | resolution | " + " | ".join(heads) + " | mean ATE [cm] | own error [cm] | RPE [mm] | failed "
         "| ms/frame |",
