@@ -237,14 +237,9 @@ def _rpe(poses: NDArray[np.float64], gt: NDArray[np.float64]) -> tuple[float, fl
 
 
 def _drift_mm(poses: NDArray[np.float64], gt: NDArray[np.float64], delta: int = 30) -> float:
-    """RMSE (mm) of the translation error of the motions over ``delta`` frames (30 = 1 s at 30 Hz): the drift
-    rate, the TUM RPE over 1 s; NaN for a sequence not longer than ``delta``."""
-    if len(poses) <= delta:
-        return math.nan
-    est = np.linalg.inv(poses[:-delta]) @ poses[delta:]
-    true = np.linalg.inv(gt[:-delta]) @ gt[delta:]
-    err = np.linalg.inv(true) @ est
-    return 1000.0 * float(np.sqrt(np.mean(np.sum(err[:, :3, 3] ** 2, axis=1))))
+    """:func:`lightfast.tracking.motion_rmse` over ``delta`` frames (30 = 1 s at 30 Hz), mm: the drift rate, the TUM
+    RPE over 1 s; NaN for a sequence not longer than ``delta``."""
+    return math.nan if len(poses) <= delta else 1000.0 * motion_rmse(poses, gt, delta)
 
 
 def _windowed_ate_cm(poses: NDArray[np.float64], gt: NDArray[np.float64], window: int = 100, step: int = 25
@@ -387,8 +382,7 @@ def _own_errors(seq: Sequence7, stretches: list[range], rows: list[dict[str, Any
                 r["own_cm"] = [100.0 * f.own_m[r["method"]] for f in ate_fits]
                 r["mean_own_cm"] = float(np.mean(r["own_cm"]))
                 r["own_rpe_mm"] = [1000.0 * f.own_m[r["method"]] for f in rpe_fits]
-                r["rpe_rmse_mm"] = [1000.0 * motion_rmse(p, t[GROUND_TRUTH])
-                                    for p, t in zip(poses[(r["method"], size)], sets, strict=True)]
+                r["rpe_rmse_mm"] = [1000.0 * f.pairwise_m[(r["method"], GROUND_TRUTH)] for f in rpe_fits]
         out.append({"resolution": size, "ground_truth_cm": [100.0 * f.own_m[GROUND_TRUTH] for f in ate_fits],
                     "misfit_cm2": [1e4 * f.misfit_m2 for f in ate_fits],
                     "ground_truth_rpe_mm": [1000.0 * f.own_m[GROUND_TRUTH] for f in rpe_fits]})
