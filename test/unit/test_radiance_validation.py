@@ -1,6 +1,10 @@
 """Small CI version of benchmarks/radiance_validation.py: our normalized sky, ground and sun irradiance against
-Radiance (rtrace -I, 8 bounces, two samples per point against its noise) in the empty window room, with the same
-targets as the full benchmark (which also covers the furnished room)."""
+Radiance (rtrace -I, 8 bounces) in the empty window room, with the same targets as the full benchmark (which also
+covers the furnished room).
+
+Radiance's reference is Monte Carlo and unseeded (two runs never agree), so each point averages six traces. With two,
+the ground component's r over 8 runs was 0.9892 ± 0.0024 and once fell to 0.9798 in CI (a flaky test); with six it
+was 0.9902 ± 0.0010 (docs/testing.md, "Radiance's noise in the CI test")."""
 from __future__ import annotations
 
 import pytest
@@ -15,7 +19,7 @@ pytestmark = pytest.mark.skipif(not radiance_available(), reason="Radiance binar
 
 def test_window_room_agrees_with_radiance() -> None:
     config = LightingMapConfig(patch_size_m=0.15, sky_directions=1024, hemisphere_rays=128)
-    results = compare_with_radiance(box_room_with_window(tessellation_m=0.15), points=30, seed=3, repeats=2,
+    results = compare_with_radiance(box_room_with_window(tessellation_m=0.15), points=30, seed=3, repeats=6,
                                     config=config, sun_disk_samples=5)
     for component, a in results.items():
         assert a.median_relative_error <= TARGET_MEDIAN, (component, a.median_relative_error)
