@@ -28,13 +28,14 @@ from geometry_msgs.msg import PoseStamped, Vector3, Vector3Stamped
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 
-from lightfast.camera import PinholeCamera
+from lightfast.camera import PinholeCamera, Undistorter
 from lightfast.config import ConfigError
 from lightfast.daylight.crf import load_crf
 from lightfast.daylight.errors import BrightnessError
 from lightfast.daylight.lighting_map import LightingMap
 from lightfast.daylight.relight import DaylightRelighter, Reference, RelightConfig
 from lightfast.daylight.relight_session import RelightFrame, RelightSession, Relit, Skip
+from lightfast.errors import CameraModelError
 from lightfast.ros.clock import ClockJumpLatch
 from lightfast.ros.convert import (
     CameraInfoReader,
@@ -82,7 +83,8 @@ class DaylightRelightNode(LightfastNode[RelightConfig]):
         self.stats |= {"frames_in": 0, "poses_in": 0, "references": 0, "dropped_behind": 0, "dropped_unpaired": 0,
                        "waiting_for_sun": 0, "bad_inputs": 0, "chunks": 0, "dropped_epochs": 0, "time_jumps": 0}
         self.session = RelightSession(self.relighter, cfg, self.now_ns, stats=self.stats)
-        self._read_camera_info = CameraInfoReader()
+        self._read_camera_info = CameraInfoReader(undistort=cfg.undistort)
+        self._undistorter: Undistorter | None = None  # of the camera_info's lens, None if it has no distortion
         self.params.on_change = self._on_config
         self._last: dict[str, Any] = {}
         self.last_status = (Level.WARN, "waiting for the first complete sun epoch")
@@ -140,7 +142,9 @@ class DaylightRelightNode(LightfastNode[RelightConfig]):
         try:
             stamp = stamp_to_ns(msg.header.stamp)
             rgb = image_to_rgb(msg)
-        except ConversionError as exc:
+            if (undistorter := self._undistorter) is not None:
+                rgb = undistorter.colour(rgb)
+        except (ConversionError, CameraModelError) as exc:
             self.problem("image", f"dropped colour image on {COLOR_TOPIC}: {exc}")
             return
         if self.session.add_image(stamp, rgb, msg.header.frame_id):
@@ -162,6 +166,7 @@ class DaylightRelightNode(LightfastNode[RelightConfig]):
         except ConversionError as exc:
             self.problem("camera_info", f"ignored {COLOR_INFO_TOPIC}: {exc}")
             return
+        self._undistorter = self._read_camera_info.undistorter  # before the camera: no image goes undistorted
         self.session.set_camera(camera)
 
     def _on_chunk(self, msg: PointCloud2) -> None:

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 from lightfast.config import Config, param
 
-__all__ = ["SENSOR_RELIABILITIES", "TIME_JUMP_BACK_S", "SensorInputOptions", "StampOptions"]
+__all__ = ["SENSOR_RELIABILITIES", "TIME_JUMP_BACK_S", "CameraInputOptions", "SensorInputOptions", "StampOptions"]
 
 #: Time going back by more than this (s) counts as a jump (a bag played again): the default of ``time_jump_back_s``,
 #: and the threshold of the nodes without input stamps to check (the sun update, rACR).
@@ -34,6 +34,19 @@ class SensorInputOptions(Config):
         10, min=1, max=1000, read_only=True,
         description="History depth of the best-effort sensor subscriptions, messages per topic (10: 0.33 s at "
         "30 Hz); the oldest are lost when the node falls further behind.",
+    )
+
+
+@dataclass(frozen=True)
+class CameraInputOptions(Config):
+    """What a node does with the images of a lens-distorted camera (``camera_info`` with non-zero ``D``)."""
+
+    undistort: bool = param(
+        True, read_only=True,
+        description="Images whose camera_info has non-zero distortion coefficients (plumb_bob, rational_polynomial, "
+        "equidistant) are resampled into the pinhole image of K before use (colour bilinear, registered depth "
+        "nearest; lightfast.camera.Undistorter); false: such camera_info is refused with a log line (rectify "
+        "upstream, e.g. image_proc).",
     )
 
 

@@ -24,7 +24,7 @@ from nav_msgs.msg import Odometry
 from sensor_msgs.msg import CameraInfo, Image
 
 from lightfast import topics
-from lightfast.camera import PinholeCamera
+from lightfast.camera import PinholeCamera, Undistorter
 from lightfast.ros import convert
 from lightfast.ros.clock import ClockJumpLatch
 from lightfast.ros.diagnostics import Level
@@ -60,7 +60,8 @@ class RGBDTrackerNode(LightfastNode[TrackerConfig]):
         self._frames: deque[Frame] = deque()
         self._ref_queue: deque[tuple[int, np.ndarray, np.ndarray]] = deque()
         self._camera: PinholeCamera | None = None
-        self._read_camera_info = convert.CameraInfoReader()
+        self._undistorter: Undistorter | None = None  # of self._camera's lens, None if it has no distortion
+        self._read_camera_info = convert.CameraInfoReader(undistort=cfg.undistort)
         self._reset: tuple[np.ndarray, int | None, str] | None = None
         self._new_config: TrackerConfig | None = None
         self.params.on_change = self._on_config
@@ -160,7 +161,7 @@ class RGBDTrackerNode(LightfastNode[TrackerConfig]):
             self._problem("camera_info", f"ignored {topics.COLOR_INFO_TOPIC}: {exc}")
             return
         with self._lock:
-            self._camera = camera
+            self._camera, self._undistorter = camera, self._read_camera_info.undistorter
 
     def _take_reset(self, msg: Any, read: Any, topic: str) -> None:
         try:
@@ -187,9 +188,9 @@ class RGBDTrackerNode(LightfastNode[TrackerConfig]):
             new_config, self._new_config = self._new_config, None
             reset, self._reset = self._reset, None
             frame = self._frames.popleft() if self._frames else None
-            camera, more = self._camera, bool(self._frames)
-        job = self.session.start_frame(frame, camera=camera, now_ns=self.now_ns(), config=new_config, reset=reset,
-                                       clock_jump_ns=self._clock_jumps.take())
+            camera, undistorter, more = self._camera, self._undistorter, bool(self._frames)
+        job = self.session.start_frame(frame, camera=camera, undistorter=undistorter, now_ns=self.now_ns(),
+                                       config=new_config, reset=reset, clock_jump_ns=self._clock_jumps.take())
         if job is not None and frame is not None:
             self.session.finish_frame(job.run(), frame)  # f2m jobs start and finish during job.run()
         return more

@@ -11,6 +11,10 @@ from contextlib import contextmanager
 from pathlib import Path
 from types import ModuleType
 
+import cv2
+import numpy as np
+
+from lightfast.camera import PinholeCamera
 from lightfast.ros.transport import local_transport_env
 
 LIGHTFAST = [sys.executable, "-m", "lightfast"]
@@ -67,3 +71,28 @@ def load_benchmark(name: str) -> ModuleType:
     sys.modules[spec.name] = module
     spec.loader.exec_module(module)
     return module
+
+
+def distorted(image: np.ndarray, camera: PinholeCamera, model: str, coefficients: Sequence[float], *,
+              nearest: bool = False, source: PinholeCamera | None = None) -> np.ndarray:
+    """What a camera with lens ``model`` / ``coefficients`` (ROS ``CameraInfo.d``) and intrinsics ``camera`` records
+    of a scene whose ideal pinhole image is ``image``: every recorded pixel samples the pinhole image where its ray
+    goes (OpenCV's iterative point undistortion, run to convergence; bilinear, or ``nearest`` for depth), black /
+    NaN where that is outside ``image``. ``source``: the pinhole camera of ``image`` if not ``camera`` -- a finer
+    rendering (less resampling than a real lens's recording has) with a margin (a barrel lens sees beyond the
+    pinhole image's edges)."""
+    d = np.asarray(coefficients, dtype=np.float64)
+    uv = camera.pixel_grid().reshape(-1, 1, 2)
+    if model == "equidistant":
+        xy = cv2.fisheye.undistortPoints(uv, camera.K, d, criteria=(cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS,
+                                                                      100, 1e-12))
+    else:
+        xy = cv2.undistortPointsIter(uv, camera.K, d, None, None, (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS,
+                                                                    100, 1e-12))
+    xy = xy.reshape(camera.height, camera.width, 2)
+    fine = camera if source is None else source
+    map_x = (fine.fx * xy[..., 0] + fine.cx).astype(np.float32)
+    map_y = (fine.fy * xy[..., 1] + fine.cy).astype(np.float32)
+    border = float("nan") if nearest else 0
+    return cv2.remap(np.ascontiguousarray(image), map_x, map_y, cv2.INTER_NEAREST if nearest else cv2.INTER_LINEAR,
+                     borderMode=cv2.BORDER_CONSTANT, borderValue=border)

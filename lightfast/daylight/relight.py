@@ -43,7 +43,7 @@ from lightfast.daylight.brightness import warm_up as warm_up_brightness
 from lightfast.daylight.crf import CameraResponse
 from lightfast.daylight.errors import BrightnessError
 from lightfast.daylight.lighting_map import LightingMap
-from lightfast.node_options import SensorInputOptions, StampOptions
+from lightfast.node_options import CameraInputOptions, SensorInputOptions, StampOptions
 
 __all__ = ["REFERENCE_KINDS", "DaylightRelighter", "Reference", "RelightConfig"]
 
@@ -55,7 +55,7 @@ _GREY = np.array([0.299, 0.587, 0.114])
 
 
 @dataclass(frozen=True)
-class RelightConfig(SensorInputOptions, StampOptions):
+class RelightConfig(SensorInputOptions, CameraInputOptions, StampOptions):
     """Brightness estimation and reference rendering (paper §III-C, §III-D), and the node's frames, sensor QoS and
     stamp checks (``daylight_relight_node``)."""
 

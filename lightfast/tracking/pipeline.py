@@ -42,7 +42,7 @@ from numpy.typing import ArrayLike, NDArray
 from lightfast.camera import PinholeCamera
 from lightfast.config import ConfigError, param
 from lightfast.geometry import inverse, make_transform, quat_to_matrix, rotation_angle_deg
-from lightfast.node_options import SensorInputOptions, StampOptions
+from lightfast.node_options import CameraInputOptions, SensorInputOptions, StampOptions
 from lightfast.tracking.errors import TrackingError, TrackingInputError
 from lightfast.tracking.rgbd_odometry import (
     MOTION_PRIOR_MAX_GAP_S,
@@ -78,7 +78,7 @@ def _within(T: NDArray[np.float64], max_m: float, max_deg: float) -> bool:
 
 
 @dataclass(frozen=True)
-class TrackerConfig(TrackingConfig, SensorInputOptions, StampOptions):
+class TrackerConfig(TrackingConfig, SensorInputOptions, CameraInputOptions, StampOptions):
     """Options of the two-step tracker (``rgbd_tracker_node``): the Eq. 7 options plus the f2m acceptance, and the
     node's frames, sensor QoS and stamp checks."""
 

@@ -27,7 +27,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from lightfast.camera import PinholeCamera
+from lightfast.camera import PinholeCamera, Undistorter
+from lightfast.errors import CameraModelError
 from lightfast.stamps import StampGuard, StampVerdict
 from lightfast.status import Level, Log, Problem, Status
 from lightfast.tracking.errors import TrackingError
@@ -144,10 +145,12 @@ class TrackingSession:
 
     def start_frame(self, frame: Frame | None, *, camera: PinholeCamera | None, now_ns: int,
                     config: TrackerConfig | None = None, reset: tuple[NDArray[np.float64], int | None, str] | None
-                    = None, clock_jump_ns: int | None = None) -> F2FJob | None:
+                    = None, clock_jump_ns: int | None = None, undistorter: Undistorter | None = None
+                    ) -> F2FJob | None:
         """One f2f step: apply a new configuration, a camera change, a clock jump back (to ``clock_jump_ns``) and
         a reset (pose, stamp, source), finish overdue frames, and start the f2f alignment of ``frame`` (None: no
-        new frame). Returns the job to run and hand to :meth:`finish_frame`, or None."""
+        new frame), undistorted into ``camera``'s pinhole image by ``undistorter`` (that of a lens-distorted
+        camera_info). Returns the job to run and hand to :meth:`finish_frame`, or None."""
         with self.lock:
             if config is not None:
                 self._apply_config(config)
@@ -160,7 +163,7 @@ class TrackingSession:
             self._finish_overdue()
             if frame is None or not self._stamp_ok(frame.stamp_ns, now_ns):
                 return None
-            job = self._start_track(frame, camera)
+            job = self._start_track(frame, camera, undistorter)
             if job is not None:
                 self._guard.accept(job.stamp_ns)
             return job
@@ -285,7 +288,8 @@ class TrackingSession:
         self._emit(Log(f"tracking reset on {source} to {np.round(T[:3, 3], 3).tolist()} m"))
         self._emit(Status(Level.OK, "tracking reset", {"stamp_ns": stamp, "source": "reset", "reason": ""}))
 
-    def _start_track(self, f: Frame, camera: PinholeCamera | None) -> F2FJob | None:
+    def _start_track(self, f: Frame, camera: PinholeCamera | None, undistorter: Undistorter | None
+                     ) -> F2FJob | None:
         stamp = f.stamp_ns
         if camera is None:
             self._problem("no_camera_info", f"frame {stamp} not tracked: no camera_info{self._camera_info_hint} yet",
@@ -304,8 +308,11 @@ class TrackingSession:
                 self._emit(Log(f"tracking starts at initial_pose {np.round(self._start_pose[:3, 3], 3).tolist()} "
                                f"m in {self.config.map_frame}{self._start_hint}", Level.WARN))
         try:
-            return self.tracker.start_coarse(stamp, f.rgb, f.depth_m)
-        except TrackingError as exc:
+            rgb, depth = f.rgb, f.depth_m
+            if undistorter is not None:
+                rgb, depth = undistorter.colour(rgb), undistorter.depth(depth)
+            return self.tracker.start_coarse(stamp, rgb, depth)
+        except (TrackingError, CameraModelError) as exc:
             self._problem("track", f"frame {stamp} not tracked: {exc}", stamp_ns=stamp)
             return None
 

@@ -38,6 +38,7 @@ from lightfast.ros.convert import (
     pose_stamped_to_matrix,
     pose_to_matrix,
     stamp_to_ns,
+    undistorter_from_camera_info,
     xyz_to_pointcloud2,
 )
 from lightfast.ros.errors import (
@@ -730,7 +731,8 @@ def test_zero_distortion_is_accepted(model: str, n_coefficients: int) -> None:
 @pytest.mark.parametrize(
     ("change", "match"),
     [
-        ({"d": [-0.28, 0.07, 0.0, 0.0, 0.0]}, r"model='plumb_bob' with D=\[-0\.28, 0\.07.*must be rectified"),
+        ({"d": [-0.28, 0.07, 0.0, 0.0, 0.0]},
+         r"model='plumb_bob' with D=\[-0\.28, 0\.07.*rectified images.*undistort true"),
         ({"distortion_model": "fisheye"}, r"distortion_model='fisheye' .* not supported"),
         ({"distortion_model": "equidistant", "d": [0.0, 0.0, 0.0, 0.1]}, r"'equidistant' .* rectified"),
         ({"d": [0.0, float("nan"), 0.0, 0.0, 0.0]}, r"D=\[0\.0, nan"),
@@ -753,6 +755,40 @@ def test_unsupported_camera_infos_raise(flavour: str, change: dict[str, Any], ma
     with pytest.raises(CameraInfoError, match=match) as info:
         camera_from_camera_info(msg)
     assert isinstance(info.value, ValueError) and isinstance(info.value, LightfastError)
+
+
+@flavour_param
+@pytest.mark.parametrize(("model", "d"), [("plumb_bob", [-0.28, 0.07, 0.001, 0.0, 0.0]),
+                                          ("plumb_bob", [-0.1] + [0.0] * 3),
+                                          ("rational_polynomial", [0.4, -2.5, 0.0, 0.0, 1.4, 0.3, -2.3, 1.3]),
+                                          ("equidistant", [0.05, -0.01, 0.0, 0.0])])
+def test_a_distorted_camera_converts_with_its_undistorter_when_the_node_undistorts(flavour: str, model: str,
+                                                                                   d: list[float]) -> None:
+    types = FLAVOURS[flavour]
+    camera = PinholeCamera(64, 48, 50.0, 51.0, 32.0, 24.0)
+    msg = camera_info_from_camera(camera, types=types)
+    msg.distortion_model, msg.d = model, types.float64_sequence(d)
+    with pytest.raises(CameraInfoError, match="rectified images"):
+        camera_from_camera_info(msg)
+    assert camera_from_camera_info(msg, undistort=True) == camera
+    u = undistorter_from_camera_info(msg)
+    assert u is not None and (u.camera, u.model, u.coefficients) == (camera, model, tuple(d))
+    reader = CameraInfoReader(undistort=True)
+    assert reader(msg) == camera and reader.undistorter is not None and reader.undistorter.coefficients == tuple(d)
+    msg.d = types.float64_sequence([0.0] * len(d))  # the driver sends an undistorted camera from now on
+    assert reader(msg) == camera and reader.undistorter is None
+    assert undistorter_from_camera_info(msg) is None
+
+
+@pytest.mark.parametrize(("model", "d", "match"), [("plumb_bob", [0.1, 0.0, 0.0], r"CameraInfo\.d: .*4 or 5"),
+                                                   ("fisheye", [0.1] * 4, "undistorts plumb_bob, rational_polynomial")])
+def test_a_lens_it_cannot_undistort_is_refused_in_one_line(model: str, d: list[float], match: str) -> None:
+    msg = camera_info_from_camera(PinholeCamera(64, 48, 50.0, 50.0, 32.0, 24.0), types=ROSBAGS)
+    msg.distortion_model, msg.d = model, np.asarray(d)
+    reader = CameraInfoReader(undistort=True)
+    with pytest.raises(CameraInfoError, match=match):
+        reader(msg)
+    assert reader.undistorter is None
 
 
 def test_zero_projection_matrix_is_allowed() -> None:

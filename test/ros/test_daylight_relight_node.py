@@ -6,6 +6,7 @@ live frames rendered with known brightness scales at known poses, and a gamma ca
 """
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections import defaultdict
 from collections.abc import Callable
@@ -51,6 +52,7 @@ from lightfast.topics import (
     SUN_CHUNK_TOPIC,
 )
 from sun_update_node.node import CHUNK_DTYPE
+from test.helpers import distorted
 from test.ros.probe import StatusProbe
 
 S_TRUE = np.array([[800.0, 760.0, 680.0], [60.0, 70.0, 90.0], [30.0, 28.0, 24.0]])  # sun, sky, ground
@@ -89,6 +91,27 @@ def make_scene(lighting_map: Path, directory: Path, num_frames: int = 4) -> Scen
     scene = Scene(lighting_map, lmap, sun, crf, crf_file, camera, poses, [])
     scene.frames = [scene.render(T) for T in poses]
     return scene
+
+
+LENS = [-0.2, 0.06, 0.001, -0.001, 0.0]  # plumb_bob, as strong as a RealSense D455's colour lens at its corners
+
+
+def lens_info(scene: Scene, d: list[float]) -> CameraInfo:
+    info = camera_info_from_camera(scene.camera, frame_id=OPTICAL_FRAME)
+    info.distortion_model, info.d = "plumb_bob", d
+    return info
+
+
+def lens_frame(scene: Scene, i: int) -> tuple[np.ndarray, np.ndarray]:
+    """Frame ``i`` as a camera with lens ``LENS`` records it (rgb8, depth m): sampled where its rays go from a
+    rendering at 4x the resolution with a margin of 20 % (the barrel lens sees beyond the pinhole image's edges)."""
+    fine = scene.camera.scaled(4)
+    pad_u, pad_v = fine.width // 5, fine.height // 5
+    wide = PinholeCamera(fine.width + 2 * pad_u, fine.height + 2 * pad_v, fine.fx, fine.fy, fine.cx + pad_u,
+                         fine.cy + pad_v)
+    rgb, depth = dataclasses.replace(scene, camera=wide).render(scene.poses[i])
+    return (distorted(rgb, scene.camera, "plumb_bob", LENS, source=wide),
+            distorted(depth, scene.camera, "plumb_bob", LENS, nearest=True, source=wide))
 
 
 def stamp(i: int) -> int:
@@ -223,6 +246,22 @@ def test_reference_for_image_and_pose_in_either_order(relight, scene: Scene) -> 
                                          and msg == "reference published")
     assert level == Level.OK and int(values["pixels_used"]) > 20
     assert float(values["render_ms"]) > 0 and float(values["estimate_ms"]) > 0
+
+
+def test_the_image_of_a_lens_distorted_camera_is_undistorted_before_its_brightness_is_fitted(relight,
+                                                                                            scene: Scene) -> None:
+    node, probe = relight(window=1, reference_scale=1.0)
+    probe.publish("info", lens_info(scene, LENS))
+    assert probe.spin_until(lambda: node._undistorter is not None)  # topics have no order: the lens first
+    send_epoch(probe, scene.sun, stamp(0))
+    probe.wait_status(lambda lvl, msg, v: v.get("sun_epoch_ns") == str(stamp(0)))
+    probe.publish("image", image_msg(scene, 1, lens_frame(scene, 1)[0]))
+    probe.publish("pose", pose_msg(scene, 1))
+    assert probe.spin_until(lambda: stamp(1) in probe.got["color"] and stamp(1) in probe.got["sun_scale"])
+    color = image_to_numpy(probe.got["color"][stamp(1)])
+    assert np.mean(np.abs(color.astype(int) - scene.frames[1][0])) < 2.0  # the pinhole image at the true pose
+    s = probe.got["sun_scale"][stamp(1)].vector
+    np.testing.assert_allclose([s.x, s.y, s.z], S_TRUE[0], rtol=0.05)
 
 
 def test_sun_epoch_swapped_in_only_when_complete(relight, scene: Scene) -> None:

@@ -10,7 +10,8 @@ conventions (frames, units, invalid values); every name is importable from this 
 * :mod:`.clouds`: ``sensor_msgs/PointCloud2`` ↔ structured point arrays (metres, in ``header.frame_id``);
 * :mod:`.poses`: ``geometry_msgs/Pose(Stamped)``, ``PoseWithCovarianceStamped``, ``nav_msgs/Odometry`` ↔ 4×4
   transforms ``T_frame_child`` (float64, metres; quaternions ``(x, y, z, w)``);
-* :mod:`.camera_info`: ``sensor_msgs/CameraInfo`` ↔ :class:`lightfast.camera.PinholeCamera` (rectified images).
+* :mod:`.camera_info`: ``sensor_msgs/CameraInfo`` ↔ :class:`lightfast.camera.PinholeCamera` (+ an Undistorter
+  for a lens-distorted camera).
 """
 from __future__ import annotations
 
@@ -19,6 +20,7 @@ from lightfast.ros.convert.camera_info import (
     CameraInfoReader,
     camera_from_camera_info,
     camera_info_from_camera,
+    undistorter_from_camera_info,
 )
 from lightfast.ros.convert.clouds import (
     PointCloud2Fields,
@@ -83,5 +85,6 @@ __all__ = [
     "pose_to_matrix",
     "pose_with_covariance_to_matrix",
     "stamp_to_ns",
+    "undistorter_from_camera_info",
     "xyz_to_pointcloud2",
 ]

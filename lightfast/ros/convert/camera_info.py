@@ -1,8 +1,11 @@
-"""``sensor_msgs/CameraInfo`` ↔ :class:`lightfast.camera.PinholeCamera`.
+"""``sensor_msgs/CameraInfo`` ↔ :class:`lightfast.camera.PinholeCamera` (+ :class:`~lightfast.camera.Undistorter`).
 
-:class:`~lightfast.camera.PinholeCamera` models rectified images only (REP-103 optical frame, intrinsics in px). A
-``CameraInfo`` converts only if its distortion coefficients are all zero (no binning, full-image ROI); the
-intrinsics come from ``K``. Written ``CameraInfo`` have ``P = [K | 0]``, ``R = I`` and ``D = 0`` (plumb_bob).
+:class:`~lightfast.camera.PinholeCamera` models undistorted images only (REP-103 optical frame, intrinsics in px;
+no binning, full-image ROI); the intrinsics come from ``K``. A ``CameraInfo`` with non-zero distortion coefficients
+converts only when the caller undistorts the images (``undistort=True``: a ``plumb_bob``, ``rational_polynomial``
+or ``equidistant`` lens, whose images :class:`~lightfast.camera.Undistorter` resamples into the pinhole image of
+``K``); otherwise it is refused with one line. Written ``CameraInfo`` have ``P = [K | 0]``, ``R = I`` and ``D = 0``
+(plumb_bob).
 """
 from __future__ import annotations
 
@@ -10,37 +13,42 @@ from typing import Any
 
 import numpy as np
 
-from lightfast.camera import PinholeCamera
+from lightfast.camera import DISTORTION_MODELS, PinholeCamera, Undistorter
 from lightfast.errors import CameraModelError
 from lightfast.ros.convert.header import make_header
 from lightfast.ros.errors import CameraInfoError
 from lightfast.ros.msgtypes import RCLPY, MessageTypes
 
-__all__ = ["SUPPORTED_DISTORTION_MODELS", "CameraInfoReader", "camera_from_camera_info", "camera_info_from_camera"]
+__all__ = ["SUPPORTED_DISTORTION_MODELS", "CameraInfoReader", "camera_from_camera_info", "camera_info_from_camera",
+           "undistorter_from_camera_info"]
 
 SUPPORTED_DISTORTION_MODELS = ("plumb_bob", "rational_polynomial", "equidistant", "")
-"""Distortion models accepted by :func:`camera_from_camera_info`, and only with all-zero coefficients."""
+"""Distortion models accepted by :func:`camera_from_camera_info` with all-zero coefficients ("" too); the first
+three also with non-zero ones when the images are undistorted (:func:`undistorter_from_camera_info`)."""
 
 
-def camera_from_camera_info(msg: Any) -> PinholeCamera:
-    """The :class:`~lightfast.camera.PinholeCamera` of a ``sensor_msgs/CameraInfo`` of rectified images.
+def camera_from_camera_info(msg: Any, *, undistort: bool = False) -> PinholeCamera:
+    """The :class:`~lightfast.camera.PinholeCamera` of a ``sensor_msgs/CameraInfo``.
 
     Requires ``width, height > 0``, a distortion model in :data:`SUPPORTED_DISTORTION_MODELS` with every
-    coefficient of ``D`` zero (or ``D`` empty), no binning (``binning_x/y`` 0 or 1) and a full-image ROI; else
-    :class:`CameraInfoError`. The intrinsics come from ``K`` (``[[fx, 0, cx], [0, fy, cy], [0, 0, 1]]``). ``P`` is
-    only checked for the projection-matrix layout when it is non-zero: for a rectified stereo pair
-    ``P[:3, :3]`` legitimately differs from ``K``, and ``R`` is ignored.
+    coefficient of ``D`` zero (or ``D`` empty) — or, with ``undistort``, any coefficients that
+    :func:`undistorter_from_camera_info` accepts (the caller then undistorts every image) —, no binning
+    (``binning_x/y`` 0 or 1) and a full-image ROI; else :class:`CameraInfoError`. The intrinsics come from ``K``
+    (``[[fx, 0, cx], [0, fy, cy], [0, 0, 1]]``). ``P`` is only checked for the projection-matrix layout when it is
+    non-zero: for a rectified stereo pair ``P[:3, :3]`` legitimately differs from ``K``, and ``R`` is ignored.
     """
     width, height = int(msg.width), int(msg.height)
     if width <= 0 or height <= 0:
         raise CameraInfoError(f"CameraInfo.width={width} and height={height} must be > 0 (camera not calibrated?)")
     model = str(msg.distortion_model)
     d = np.asarray(msg.d, dtype=np.float64).reshape(-1)
-    if model not in SUPPORTED_DISTORTION_MODELS or np.any(d != 0.0):
+    if model not in SUPPORTED_DISTORTION_MODELS or (np.any(d != 0.0) and not (undistort and model in
+                                                                                DISTORTION_MODELS)):
         raise CameraInfoError(
-            f"CameraInfo.distortion_model={model!r} with D={d.tolist()} is not supported: lightfast models ideal "
-            "pinhole cameras only, so images must be rectified (e.g. by image_proc) and described by a CameraInfo "
-            "whose distortion coefficients are all zero"
+            f"CameraInfo.distortion_model={model!r} with D={d.tolist()} is not supported: "
+            + ("lightfast undistorts plumb_bob, rational_polynomial and equidistant lenses only" if undistort else
+               "lightfast models ideal pinhole cameras, so give it rectified images (e.g. from image_proc) or let "
+               "the node undistort them (parameter undistort true)")
         )
     for name in ("binning_x", "binning_y"):
         binning = int(getattr(msg, name, 0))
@@ -79,13 +87,31 @@ def camera_from_camera_info(msg: Any) -> PinholeCamera:
         raise CameraInfoError(f"CameraInfo.k: {exc}") from exc
 
 
+def undistorter_from_camera_info(msg: Any) -> Undistorter | None:
+    """The :class:`~lightfast.camera.Undistorter` of a ``CameraInfo`` whose ``D`` is not all zero (None if it is),
+    mapping its images to the pinhole camera of :func:`camera_from_camera_info` (``undistort=True``).
+    :class:`CameraInfoError` for a model it cannot invert or a wrong number of coefficients."""
+    camera = camera_from_camera_info(msg, undistort=True)
+    d = np.asarray(msg.d, dtype=np.float64).reshape(-1)
+    if not np.any(d != 0.0):
+        return None
+    try:
+        return Undistorter(camera, str(msg.distortion_model), d)
+    except CameraModelError as exc:
+        raise CameraInfoError(f"CameraInfo.d: {exc}") from exc
+
+
 class CameraInfoReader:
     """:func:`camera_from_camera_info` that keeps its last result: a driver sends the same ``CameraInfo`` with every
-    image, and a node that converts each one spends more on the checks than on anything else it does per message."""
+    image, and a node that converts each one spends more on the checks than on anything else it does per message.
+    With ``undistort`` a lens-distorted ``CameraInfo`` is accepted and :attr:`undistorter` (None for an undistorted
+    one) resamples its images into the returned camera's (:func:`undistorter_from_camera_info`)."""
 
-    def __init__(self) -> None:
+    def __init__(self, undistort: bool = False) -> None:
+        self._undistort = undistort
         self._key: tuple[Any, ...] | None = None
         self._camera: PinholeCamera | None = None
+        self.undistorter: Undistorter | None = None
 
     def __call__(self, msg: Any) -> PinholeCamera:
         roi = getattr(msg, "roi", None)
@@ -94,8 +120,9 @@ class CameraInfoReader:
                getattr(msg, "binning_x", 0), getattr(msg, "binning_y", 0),
                None if roi is None else (roi.x_offset, roi.y_offset, roi.width, roi.height))
         if key != self._key or self._camera is None:
-            self._camera = camera_from_camera_info(msg)  # raises before the key is kept
-            self._key = key
+            camera = camera_from_camera_info(msg, undistort=self._undistort)  # raises before the key is kept
+            self.undistorter = undistorter_from_camera_info(msg) if self._undistort else None
+            self._camera, self._key = camera, key
         return self._camera
 
 
