@@ -181,6 +181,7 @@ alignment towards zero motion). Depth of a
         if not (np.all(np.isfinite(map_x)) and np.all(np.isfinite(map_y))):
             raise CameraModelError(f"the {model} lens D={d.tolist()} does not map every pixel of {size}")
         self._map_x, self._map_y = map_x, map_y
+        self._block_x, self._block_y = map_x - np.float32(0.5), map_y - np.float32(0.5)  # rounding gives the floor
         # fixed-point maps for bilinear lookups: the same values to 1/32 px, remapped about twice as fast
         self._fixed = cv2.convertMaps(map_x, map_y, cv2.CV_16SC2)
 
@@ -198,20 +199,19 @@ alignment towards zero motion). Depth of a
         d = self._check(depth_m, "depth image").astype(np.float32)
         if d.ndim != 2:
             raise CameraModelError(f"depth image must be (H, W), got shape {d.shape}")
-        d[~(d > 0.0)] = np.nan
+        invalid = ~(d > 0.0)
+        d[invalid] = np.nan
         nan = float("nan")
         near = cv2.remap(d, self._map_x, self._map_y, cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT,
                          borderValue=nan)
         lin = cv2.remap(d, self._map_x, self._map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
                         borderValue=nan)  # NaN where any of the four is invalid
-        h, w = d.shape
-        span = np.full((h + 1, w + 1), np.inf, np.float32)  # span[v, u]: max - min of d[v:v+2, u:u+2]
-        quad = np.stack([d[:-1, :-1], d[:-1, 1:], d[1:, :-1], d[1:, 1:]])
-        span[:-2, :-2] = quad.max(axis=0) - quad.min(axis=0)
-        u0 = np.clip(np.floor(self._map_x), -1, w).astype(np.intp)
-        v0 = np.clip(np.floor(self._map_y), -1, h).astype(np.intp)
-        smooth = span[v0, u0] <= DEPTH_STEP_M
-        return cast(NDArray[np.float32], np.where(smooth & np.isfinite(lin), lin, near))
+        d[invalid] = 0.0  # a block with an invalid pixel is NaN in lin anyway
+        quad, corner = np.ones((2, 2), np.uint8), (0, 0)  # the block d[v:v+2, u:u+2]
+        span = cv2.dilate(d, quad, anchor=corner) - cv2.erode(d, quad, anchor=corner)
+        span_at = cv2.remap(span, self._block_x, self._block_y, cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT,
+                            borderValue=float("inf"))  # of the block whose top-left pixel is floor(map)
+        return cast(NDArray[np.float32], np.where((span_at <= DEPTH_STEP_M) & np.isfinite(lin), lin, near))
 
     def _check(self, image: ArrayLike, what: str) -> NDArray[Any]:
         img = np.ascontiguousarray(image)

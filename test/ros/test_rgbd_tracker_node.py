@@ -343,8 +343,8 @@ def send_through_lens(probe: Probe, scene: Scene, i: int) -> None:
 
 def test_a_lens_distorted_camera_tracks_like_a_pinhole_one(start_nodes, scene: Scene) -> None:
     """A camera_info with non-zero D (a driver's raw colour and the depth registered to it): the node undistorts both
-    into the pinhole image of K before f2f. (When this test was written: 0.5 and 1.1 mm off at frames 1-2; the same
-    frames read as pinhole images, D = 0, 9 and 19 mm off: the lens is not negligible here.)"""
+    into the pinhole image of K before f2f. The same frames read as pinhole images (D = 0) are off by more than the
+    bound (docs/robots.md, "Lenses"): the lens is not negligible here."""
     tracker, _, probe = start_nodes({"initial_pose": pose7(scene.poses[0]), **F2F_ONLY})
     probe.publish("info", lens_info(scene, LENS))
     # callbacks of separate topics have no order: the lens first, or frame 0 is dropped for want of a camera
