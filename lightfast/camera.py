@@ -154,13 +154,12 @@ class Undistorter:
     ``camera`` is the pinhole model (``K`` and size) the output has; ``model`` and ``coefficients`` are the lens's
     (:data:`DISTORTION_MODELS`; Brown–Conrady ``plumb_bob`` / ``rational_polynomial``, Kannala–Brandt
     ``equidistant``). Each output pixel is looked up where the lens put its ray (OpenCV's
-    ``initUndistortRectifyMap``, ``cv2.fisheye`` for ``equidistant``; written by hand would only repeat it): colour
-    is interpolated bilinearly, depth takes the nearest pixel (a mean across a depth edge is a surface that is not
-    there). Output pixels whose ray falls outside the input (corners of a pincushion lens) are invalid in depth
-(NaN) and repeat the nearest recorded colour (black there would be an edge that never moves, which pulls an
-alignment towards zero motion). Depth of a
-    depth camera registered to this colour camera (e.g. ``aligned_depth_to_color``) lies on the same distorted grid,
-    so the same lookup applies. The maps are computed once; :meth:`colour` and :meth:`depth` are one ``cv2.remap``.
+    ``initUndistortRectifyMap``, ``cv2.fisheye`` for ``equidistant``; written by hand would only repeat it), once
+    per image through maps computed here: :meth:`colour` bilinearly, :meth:`depth` bilinearly on smooth surfaces
+    and from the nearest pixel across depth edges. Depth registered to this colour camera (e.g. a driver's
+    ``aligned_depth_to_color``) lies on the same distorted pixel grid, so the same lookup applies. Output pixels
+    whose ray falls outside the input (corners of a pincushion lens) are invalid depth (NaN) and repeat the nearest
+    recorded colour (black there would be an edge that never moves, which pulls an alignment towards zero motion).
     """
 
     def __init__(self, camera: PinholeCamera, model: str, coefficients: ArrayLike) -> None:

@@ -47,8 +47,8 @@ def camera_from_camera_info(msg: Any, *, undistort: bool = False) -> PinholeCame
         raise CameraInfoError(
             f"CameraInfo.distortion_model={model!r} with D={d.tolist()} is not supported: "
             + ("lightfast undistorts plumb_bob, rational_polynomial and equidistant lenses only" if undistort else
-               "lightfast models ideal pinhole cameras, so give it rectified images (e.g. from image_proc) or let "
-               "the node undistort them (parameter undistort true)")
+               "lightfast models ideal pinhole cameras, so give it rectified images (e.g. from image_proc), or let "
+               "rgbd_tracker_node and daylight_relight_node undistort them (parameter undistort true)")
         )
     for name in ("binning_x", "binning_y"):
         binning = int(getattr(msg, name, 0))
