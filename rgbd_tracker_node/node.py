@@ -55,7 +55,7 @@ class RGBDTrackerNode(LightfastNode[TrackerConfig]):
             start_hint=f"; if the camera is elsewhere, send its pose on {topics.INITIAL_POSE_TOPIC} (RViz: 2D Pose "
                        f"Estimate) or {topics.TRACKER_RESET_TOPIC}")
         self._lock = threading.Lock()  # guards everything the input callbacks share with the workers
-        self._live: ExactTimePairs[tuple[np.ndarray, str], np.ndarray] = ExactTimePairs(MAX_UNPAIRED)
+        self._live: ExactTimePairs[tuple[np.ndarray, str], tuple[np.ndarray, str]] = ExactTimePairs(MAX_UNPAIRED)
         self._refs: ExactTimePairs[np.ndarray, np.ndarray] = ExactTimePairs(MAX_UNPAIRED)
         self._frames: deque[Frame] = deque()
         self._ref_queue: deque[tuple[int, np.ndarray, np.ndarray]] = deque()
@@ -122,15 +122,15 @@ class RGBDTrackerNode(LightfastNode[TrackerConfig]):
     def _on_depth(self, msg: Image) -> None:
         if (got := self._read(msg, convert.depth_to_metres, "depth", "depth image", topics.DEPTH_TOPIC)):
             with self._lock:
-                self._enqueue_frame(got[0], self._live.add_second(*got))
+                self._enqueue_frame(got[0], self._live.add_second(got[0], (got[1], msg.header.frame_id)))
 
-    def _enqueue_frame(self, stamp: int, pair: tuple[tuple[np.ndarray, str], np.ndarray] | None) -> None:
+    def _enqueue_frame(self, stamp: int, pair: tuple[tuple[np.ndarray, str], tuple[np.ndarray, str]] | None) -> None:
         self.stats["dropped_unpaired"] = self._live.dropped
         if pair is None:
             return
-        (rgb, frame_id), depth = pair
+        (rgb, frame_id), (depth, depth_frame_id) = pair
         lag_ns = max(0, self.now_ns() - stamp)
-        self._frames.append(Frame(stamp, rgb, depth, frame_id, time.monotonic(), lag_ns))
+        self._frames.append(Frame(stamp, rgb, depth, frame_id, time.monotonic(), lag_ns, depth_frame_id))
         while len(self._frames) > MAX_QUEUED:
             self._frames.popleft()
             self.stats["dropped_behind"] += 1

@@ -43,7 +43,7 @@ PREPARATION_FIELDS = ("pyramid_levels", "resolution_scale", "min_depth_m", "max_
 
 @dataclass(frozen=True, eq=False)
 class Frame:
-    """A paired live frame: colour (H×W×3 RGB or H×W grey), depth in metres, the image's frame id."""
+    """A paired live frame: colour (H×W×3 RGB or H×W grey), depth in metres, the images' frame ids."""
 
     stamp_ns: int
     rgb: NDArray[Any]
@@ -51,6 +51,7 @@ class Frame:
     frame_id: str
     received_s: float  # clock() when the pair was complete
     arrival_lag_ns: int  # node clock minus the image stamp when the pair was complete (>= 0)
+    depth_frame_id: str = ""  # the depth image's; "" = not said
 
 
 @dataclass(frozen=True, eq=False)
@@ -307,6 +308,10 @@ class TrackingSession:
                 self._announce_start = False
                 self._emit(Log(f"tracking starts at initial_pose {np.round(self._start_pose[:3, 3], 3).tolist()} "
                                f"m in {self.config.map_frame}{self._start_hint}", Level.WARN))
+        if f.depth_frame_id not in ("", f.frame_id):  # e.g. a driver's raw depth topic instead of its aligned one
+            self._emit(Log(f"depth images in frame {f.depth_frame_id!r}, colour in {f.frame_id!r}: the tracker needs "
+                           "depth registered to the colour camera (a driver's aligned_depth_to_color); tracking "
+                           "them as if it were", Level.WARN, key="depth_frame"))
         try:
             rgb, depth = f.rgb, f.depth_m
             if undistorter is not None:

@@ -144,3 +144,17 @@ def test_bad_frames_are_reported_not_tracked(frames) -> None:
     assert [p.key for p in problems] == ["no_camera_info", "size", "stamp"]
     assert problems[1].values["reason"] == problems[1].text and "depth 160x120" in problems[1].text
     assert not [e for e in events if isinstance(e, CoarsePose)] and session.tracker is None
+
+
+def test_depth_in_another_frame_than_the_colour_is_said_and_tracked_anyway(frames) -> None:
+    """A driver's raw depth topic (its own optical frame) instead of the one registered to the colour camera."""
+    session, events, _ = make_session()
+    rgb, depth, _ = frames[0]
+    for stamp_s, depth_frame in ((1.0, "cam"), (2.0, ""), (3.0, "camera_depth_optical_frame")):
+        frame = Frame(int(stamp_s * S), rgb, depth.astype(np.float32), "cam", 0.0, 0, depth_frame)
+        job = session.start_frame(frame, camera=CAMERA, now_ns=int(stamp_s * S))
+        assert job is not None
+        session.finish_frame(job.run(), frame)
+    said = [e for e in events if isinstance(e, Log) and e.key == "depth_frame"]
+    assert len(said) == 1 and "'camera_depth_optical_frame', colour in 'cam'" in said[0].text
+    assert said[0].level == Level.WARN and "aligned_depth_to_color" in said[0].text
