@@ -44,9 +44,9 @@ class CameraInputOptions(Config):
     undistort: bool = param(
         True, read_only=True,
         description="Images whose camera_info has non-zero distortion coefficients (plumb_bob, rational_polynomial, "
-        "equidistant) are resampled into the pinhole image of K before use (colour bilinear, registered depth "
-        "nearest; lightfast.camera.Undistorter); false: such camera_info is refused with a log line (rectify "
-        "upstream, e.g. image_proc).",
+        "equidistant) are resampled into the pinhole image of K before use (lightfast.camera.Undistorter: colour "
+        "bilinear; registered depth bilinear on smooth surfaces, nearest across edges); false: such camera_info is "
+        "refused with a log line (rectify upstream, e.g. image_proc).",
     )
 
 

@@ -104,6 +104,20 @@ def test_undistorted_depth_keeps_measured_values_and_puts_them_where_the_pinhole
     assert np.isnan(Undistorter(CAM_LENS, model, d).depth(recorded)[0, 0])
 
 
+def test_undistorted_depth_of_a_slanted_wall_is_interpolated_not_shifted() -> None:
+    """On a smooth surface the depth is interpolated at the lookup: the nearest pixel alone would move it by up to
+    half a pixel, a warp of the surface an aligner takes for motion."""
+    model, d = "plumb_bob", LENSES["plumb_bob"]
+    rays = CAM_LENS.backproject(CAM_LENS.pixel_grid(), np.ones(CAM_LENS.shape))
+    normal, offset = np.array([0.5, 0.0, -1.0]) / np.hypot(0.5, 1.0), -1.5  # n·p = offset, a wall seen at 27°
+    pinhole = (offset / (rays @ normal)).astype(np.float32)  # z of the wall along each pinhole ray
+    recorded = distorted(pinhole, CAM_LENS, model, d)  # smooth: sampled bilinearly is the lens's own recording
+    inner = (slice(20, -20), slice(20, -20))
+    err = np.abs(Undistorter(CAM_LENS, model, d).depth(recorded) - pinhole)[inner]
+    slope = np.abs(np.diff(pinhole, axis=1)).max()  # m per pixel: what half a pixel's shift would cost
+    assert err.max() < 0.1 * slope, (err.max(), slope)
+
+
 def test_pixels_the_lens_did_not_see_are_invalid_depth_and_make_no_colour_edge() -> None:
     pincushion = [0.3, 0.2, 0.0, 0.0, 0.0]  # the pinhole corners fall outside the recorded image
     u = Undistorter(CAM_LENS, "plumb_bob", pincushion)
