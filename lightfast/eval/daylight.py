@@ -127,15 +127,17 @@ def recording_frames(bag_dir: Path, *, step: int = 1, limit: int | None = None,
                      kept: Callable[[int], bool] | None = None) -> Iterator[
         tuple[int, NDArray[np.uint8], NDArray[np.float32], PinholeCamera, NDArray[np.float64]]]:
     """(stamp_ns, rgb, depth_m, camera, T_map_cam of the truth) of every ``step``-th complete frame (paired by exact
-    stamp) of the first ``limit`` of a simulated recording, of those only the ones ``kept(i)`` (asked in order, i
-    counting every ``step``-th frame) keeps; skipped frames are not converted, nor the bag read on."""
-    from lightfast.ros.convert import camera_from_camera_info, image_to_numpy, pose_stamped_to_matrix
+    stamp) of the first ``limit`` of a recording, of those only the ones ``kept(i)`` (asked in order, i counting
+    every ``step``-th frame) keeps; skipped frames are not converted, nor the bag read on. A lens in the colour
+    ``camera_info`` is undistorted as ``rgbd_tracker_node`` does by default (``camera`` is then the pinhole of K)."""
+    from lightfast.ros.convert import CameraInfoReader, image_to_numpy, pose_stamped_to_matrix
 
     if step < 1:
         raise DaylightEvalError(f"step must be at least 1, got {step}")
     parts: dict[int, dict[str, Any]] = {}
     need = (COLOR_TOPIC, DEPTH_TOPIC, COLOR_INFO_TOPIC, GT_POSE_TOPIC)
     complete = 0
+    read_camera = CameraInfoReader(undistort=True)
     with open_bag(bag_dir) as bag:
         for m in bag.messages(topics=need):
             if limit is not None and complete >= limit:
@@ -150,10 +152,12 @@ def recording_frames(bag_dir: Path, *, step: int = 1, limit: int | None = None,
             complete += 1
             if (complete - 1) % step or (kept is not None and not kept((complete - 1) // step)):
                 continue
-            d = image_to_numpy(p[DEPTH_TOPIC])
-            yield (stamp, image_to_numpy(p[COLOR_TOPIC]),
-                   d.astype(np.float32) / 1000.0 if d.dtype == np.uint16 else d.astype(np.float32),
-                   camera_from_camera_info(p[COLOR_INFO_TOPIC]), pose_stamped_to_matrix(p[GT_POSE_TOPIC])[0])
+            camera = read_camera(p[COLOR_INFO_TOPIC])
+            rgb, d = image_to_numpy(p[COLOR_TOPIC]), image_to_numpy(p[DEPTH_TOPIC])
+            depth = d.astype(np.float32) / 1000.0 if d.dtype == np.uint16 else d.astype(np.float32)
+            if (undistorter := read_camera.undistorter) is not None:
+                rgb, depth = undistorter.colour(rgb), undistorter.depth(depth)
+            yield stamp, rgb, depth, camera, pose_stamped_to_matrix(p[GT_POSE_TOPIC])[0]
 
 
 def sequence_files(seq_dir: Path) -> dict[str, Path]:

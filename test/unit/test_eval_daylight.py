@@ -6,6 +6,7 @@ import json
 import shutil
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 
@@ -115,6 +116,46 @@ def test_recording_frames_converts_only_the_frames_kept(sim_dir: Path, monkeypat
     assert kept[0][2].dtype == np.float32 and kept[0][1].ndim == 3 and kept[0][4].shape == (4, 4)
     with pytest.raises(DaylightEvalError, match="step"):
         next(recording_frames(bag, step=0))
+
+
+def test_recording_frames_undistort_a_lens_as_the_tracker_node_does(sim_dir: Path, tmp_path: Path) -> None:
+    """A recording made through a lens (its colour camera_info has D): frames come out as the pinhole images."""
+    from lightfast.bag.reader import open_bag
+    from lightfast.bag.writer import BagWriter, make_qos
+    from lightfast.eval.daylight import recording_frames
+    from lightfast.ros.convert import camera_from_camera_info, image_to_numpy, numpy_to_image
+    from lightfast.ros.msgtypes import rosbags_types
+    from lightfast.topics import COLOR_INFO_TOPIC, COLOR_TOPIC, DEPTH_TOPIC
+    from test.helpers import distorted
+
+    lens = [-0.2, 0.06, 0.001, -0.001, 0.0]
+    source, lensed = sim_dir / "DS1.T6" / "bag", tmp_path / "lens_bag"
+    types, cam = rosbags_types(), next(recording_frames(source, limit=1))[3]
+    with open_bag(source) as bag, BagWriter(lensed) as out:
+        for topic in bag.info.topics:
+            out.add_topic(topic.name, topic.msgtype, offered_qos=[make_qos(reliable=True, depth=10)])
+        for m in bag.messages():
+            msg = bag.deserialize(m)
+            if m.topic == COLOR_INFO_TOPIC:
+                assert camera_from_camera_info(msg) == cam
+                msg.distortion_model, msg.d = "plumb_bob", np.asarray(lens)
+            elif m.topic in (COLOR_TOPIC, DEPTH_TOPIC):
+                msg = numpy_to_image(distorted(image_to_numpy(msg), cam, "plumb_bob", lens,
+                                               nearest=m.topic == DEPTH_TOPIC),
+                                     msg.encoding, stamp_ns=m.log_time_ns, frame_id=msg.header.frame_id, types=types)
+            out.write_message(m.topic, m.log_time_ns, msg)
+    pinhole = list(recording_frames(source, limit=3))
+    undistorted = list(recording_frames(lensed, limit=3))
+    inner = (slice(10, -10), slice(10, -10))
+    for (_, rgb, depth, camera, T), (_, rgb_u, depth_u, camera_u, T_u) in zip(pinhole, undistorted, strict=True):
+        assert camera_u == camera and np.array_equal(T_u, T)
+        def smooth(img: np.ndarray) -> np.ndarray:  # the sensor noise of the recording, resampled twice, aside
+            return cv2.GaussianBlur(img.astype(np.float32), (0, 0), 1.5)
+
+        lens_err = np.mean(np.abs(smooth(distorted(rgb, camera, "plumb_bob", lens)) - smooth(rgb))[inner])
+        err = np.mean(np.abs(smooth(rgb_u) - smooth(rgb))[inner])
+        assert err < 0.25 * lens_err, (err, lens_err)
+        assert np.nanmedian(np.abs(depth_u - depth)[inner]) < 0.01
 
 
 def test_bad_inputs_are_clear_errors(sim_dir: Path, tmp_path: Path) -> None:
