@@ -1,4 +1,7 @@
-"""Pairing two message streams by exact stamp, like ``message_filters.TimeSynchronizer`` (not in the PyPI wheels).
+"""Pairing two message streams by stamp, like ``message_filters.TimeSynchronizer`` (not in the PyPI wheels): exactly,
+or within a tolerance ``slop_ns`` for drivers that stamp the two streams apart (``ApproximateTimeSynchronizer``'s
+"slop"; here the closest waiting partner within it is taken at once, which is unambiguous while the slop is below
+half the frame period).
 
 Nothing here imports rclpy; callers running callbacks on several threads hold their own lock around it.
 """
@@ -14,16 +17,20 @@ B = TypeVar("B")
 
 
 class ExactTimePairs(Generic[A, B]):
-    """Items of two streams (``first``, ``second``) matched by equal integer stamps, either side arriving first.
+    """Items of two streams (``first``, ``second``) matched by equal integer stamps (or, with ``slop_ns`` > 0, the
+    waiting partner closest in stamp within ``slop_ns``), either side arriving first.
 
     Each side keeps at most ``capacity`` unmatched items; beyond that its oldest (by arrival) is dropped and
     counted in :attr:`dropped`. A second item with a stamp already waiting on the same side replaces it.
     """
 
-    def __init__(self, capacity: int) -> None:
+    def __init__(self, capacity: int, slop_ns: int = 0) -> None:
         if capacity < 1:
             raise ValueError(f"capacity must be >= 1, got {capacity}")
+        if slop_ns < 0:
+            raise ValueError(f"slop_ns must be >= 0, got {slop_ns}")
         self.capacity = int(capacity)
+        self.slop_ns = int(slop_ns)
         self._first: OrderedDict[int, A] = OrderedDict()
         self._second: OrderedDict[int, B] = OrderedDict()
         self.dropped = 0
@@ -35,6 +42,10 @@ class ExactTimePairs(Generic[A, B]):
     def _add(self, own: OrderedDict, other: OrderedDict, stamp: int, item: object) -> object | None:
         if stamp in other:
             return other.pop(stamp)
+        if self.slop_ns and other:
+            closest = min(other, key=lambda s: abs(s - stamp))
+            if abs(closest - stamp) <= self.slop_ns:
+                return other.pop(closest)
         own[stamp] = item
         own.move_to_end(stamp)
         while len(own) > self.capacity:

@@ -55,7 +55,8 @@ class RGBDTrackerNode(LightfastNode[TrackerConfig]):
             start_hint=f"; if the camera is elsewhere, send its pose on {topics.INITIAL_POSE_TOPIC} (RViz: 2D Pose "
                        f"Estimate) or {topics.TRACKER_RESET_TOPIC}")
         self._lock = threading.Lock()  # guards everything the input callbacks share with the workers
-        self._live: ExactTimePairs[tuple[np.ndarray, str], tuple[np.ndarray, str]] = ExactTimePairs(MAX_UNPAIRED)
+        self._live: ExactTimePairs[tuple[int, np.ndarray, str], tuple[np.ndarray, str]] = ExactTimePairs(
+            MAX_UNPAIRED, slop_ns=round(cfg.pair_slop_s * 1e9))
         self._refs: ExactTimePairs[np.ndarray, np.ndarray] = ExactTimePairs(MAX_UNPAIRED)
         self._frames: deque[Frame] = deque()
         self._ref_queue: deque[tuple[int, np.ndarray, np.ndarray]] = deque()
@@ -117,18 +118,21 @@ class RGBDTrackerNode(LightfastNode[TrackerConfig]):
                               topics.COLOR_TOPIC)):
             with self._lock:
                 self.stats["frames_in"] += 1
-                self._enqueue_frame(got[0], self._live.add_first(got[0], (got[1], msg.header.frame_id)))
+                self._enqueue_frame(self._live.add_first(got[0], (got[0], got[1], msg.header.frame_id)))
 
     def _on_depth(self, msg: Image) -> None:
         if (got := self._read(msg, convert.depth_to_metres, "depth", "depth image", topics.DEPTH_TOPIC)):
             with self._lock:
-                self._enqueue_frame(got[0], self._live.add_second(got[0], (got[1], msg.header.frame_id)))
+                self._enqueue_frame(self._live.add_second(got[0], (got[1], msg.header.frame_id)))
 
-    def _enqueue_frame(self, stamp: int, pair: tuple[tuple[np.ndarray, str], tuple[np.ndarray, str]] | None) -> None:
+    def _enqueue_frame(self, pair: tuple[tuple[int, np.ndarray, str], tuple[np.ndarray, str]] | None) -> None:
+        if self._live.dropped > self.stats["dropped_unpaired"]:  # throttled; a driver stamping them apart?
+            self._problem("unpaired", f"{self._live.dropped} colour or depth images had no partner within "
+                          f"pair_slop_s={self.config.pair_slop_s} s of their stamp")
         self.stats["dropped_unpaired"] = self._live.dropped
         if pair is None:
             return
-        (rgb, frame_id), (depth, depth_frame_id) = pair
+        (stamp, rgb, frame_id), (depth, depth_frame_id) = pair
         lag_ns = max(0, self.now_ns() - stamp)
         self._frames.append(Frame(stamp, rgb, depth, frame_id, time.monotonic(), lag_ns, depth_frame_id))
         while len(self._frames) > MAX_QUEUED:

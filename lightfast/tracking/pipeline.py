@@ -90,6 +90,12 @@ class TrackerConfig(TrackingConfig, SensorInputOptions, CameraInputOptions, Stam
                               "one parent).", read_only=True)
     publish_tf: bool = param(True, description="Broadcast each pose on /tf as map_frame -> camera_frame.",
                              read_only=True)
+    pair_slop_s: float = param(
+        0.0, min=0.0, max=0.05, read_only=True,
+        description="Colour and depth images are paired by stamp: exactly (0), or the closest within this many "
+        "seconds, for drivers that stamp the two streams apart (keep it below half the frame period). A frame takes "
+        "its colour image's stamp.",
+    )
 
     initial_pose: tuple[float, ...] = param(
         (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0),

@@ -361,6 +361,26 @@ def test_a_lens_is_refused_in_one_line_when_undistortion_is_off(start_nodes, sce
     assert probe.wait_status(lambda lvl, msg, v: "rectified images" in msg and lvl == Level.WARN)
 
 
+@pytest.mark.parametrize("slop_s", [0.0, 0.01])
+def test_a_driver_that_stamps_depth_apart_from_colour_needs_pair_slop(start_nodes, scene: Scene,
+                                                                      slop_s: float) -> None:
+    """Depth stamped 5 ms after its colour image: exact pairing (the default) pairs nothing and says so; with
+    pair_slop_s each frame is tracked and published under its colour image's stamp."""
+    tracker, _, probe = start_nodes({"initial_pose": pose7(scene.poses[0]), "pair_slop_s": slop_s, **F2F_ONLY})
+    probe.publish("info", camera_info_from_camera(scene.camera, frame_id=OPTICAL_FRAME))
+    assert probe.spin_until(lambda: tracker._camera is not None)  # topics have no order: the camera first
+    for i in range(12 if slop_s == 0.0 else 3):
+        rgb, depth = scene.frames[i % 3]
+        probe.publish("image", numpy_to_image(rgb, "rgb8", stamp_ns=stamp(i), frame_id=OPTICAL_FRAME))
+        probe.publish("depth", numpy_to_image(depth, "32FC1", stamp_ns=stamp(i) + 5_000_000, frame_id=OPTICAL_FRAME))
+        if slop_s:
+            dt, dr = errors(wait_pose(probe, i), scene.poses[i])
+            assert dt < 0.005 and dr < 0.3, (i, dt, dr)
+    if slop_s == 0.0:
+        assert probe.wait_status(lambda lvl, msg, v: "no partner within pair_slop_s=0.0 s" in msg)
+        assert not probe.got["pose"]
+
+
 def test_an_unknown_encoding_is_named_in_the_log(start_nodes, scene: Scene) -> None:
     _, _, probe = start_nodes({"initial_pose": pose7(scene.poses[0]), **F2F_ONLY})
     rgb = scene.frames[0][0]
