@@ -126,9 +126,10 @@ class RGBDTrackerNode(LightfastNode[TrackerConfig]):
                 self._enqueue_frame(self._live.add_second(got[0], (got[1], msg.header.frame_id)))
 
     def _enqueue_frame(self, pair: tuple[tuple[int, np.ndarray, str], tuple[np.ndarray, str]] | None) -> None:
-        if self._live.dropped > self.stats["dropped_unpaired"]:  # throttled; a driver stamping them apart?
+        if self._live.dropped > self.stats["dropped_unpaired"]:  # throttled
             self._problem("unpaired", f"{self._live.dropped} colour or depth images had no partner within "
-                          f"pair_slop_s={self.config.pair_slop_s} s of their stamp")
+                          f"pair_slop_s={self.config.pair_slop_s} s of their stamp (lost on the way, or a driver "
+                          "that stamps the two apart: raise pair_slop_s)")
         self.stats["dropped_unpaired"] = self._live.dropped
         if pair is None:
             return
