@@ -28,7 +28,7 @@ from geometry_msgs.msg import PoseStamped, Vector3, Vector3Stamped
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 
-from lightfast.camera import PinholeCamera, Undistorter
+from lightfast.camera import PinholeCamera
 from lightfast.config import ConfigError
 from lightfast.daylight.crf import load_crf
 from lightfast.daylight.errors import BrightnessError
@@ -83,8 +83,7 @@ class DaylightRelightNode(LightfastNode[RelightConfig]):
         self.stats |= {"frames_in": 0, "poses_in": 0, "references": 0, "dropped_behind": 0, "dropped_unpaired": 0,
                        "waiting_for_sun": 0, "bad_inputs": 0, "chunks": 0, "dropped_epochs": 0, "time_jumps": 0}
         self.session = RelightSession(self.relighter, cfg, self.now_ns, stats=self.stats)
-        self._read_camera_info = CameraInfoReader(undistort=cfg.undistort)
-        self._undistorter: Undistorter | None = None  # of the camera_info's lens, None if it has no distortion
+        self._read_camera_info = CameraInfoReader(undistort=cfg.undistort)  # .undistorter: of its lens, or None
         self.params.on_change = self._on_config
         self._last: dict[str, Any] = {}
         self.last_status = (Level.WARN, "waiting for the first complete sun epoch")
@@ -142,7 +141,7 @@ class DaylightRelightNode(LightfastNode[RelightConfig]):
         try:
             stamp = stamp_to_ns(msg.header.stamp)
             rgb = image_to_rgb(msg)
-            if (undistorter := self._undistorter) is not None:
+            if (undistorter := self._read_camera_info.undistorter) is not None:
                 rgb = undistorter.colour(rgb)
         except (ConversionError, CameraModelError) as exc:
             self.problem("image", f"dropped colour image on {COLOR_TOPIC}: {exc}")
@@ -166,8 +165,7 @@ class DaylightRelightNode(LightfastNode[RelightConfig]):
         except ConversionError as exc:
             self.problem("camera_info", f"ignored {COLOR_INFO_TOPIC}: {exc}")
             return
-        self._undistorter = self._read_camera_info.undistorter  # before the camera: no image goes undistorted
-        self.session.set_camera(camera)
+        self.session.set_camera(camera)  # the reader took the lens first: no image goes undistorted
 
     def _on_chunk(self, msg: PointCloud2) -> None:
         try:

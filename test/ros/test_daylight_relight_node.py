@@ -252,7 +252,7 @@ def test_the_image_of_a_lens_distorted_camera_is_undistorted_before_its_brightne
                                                                                             scene: Scene) -> None:
     node, probe = relight(window=1, reference_scale=1.0)
     probe.publish("info", lens_info(scene, LENS))
-    assert probe.spin_until(lambda: node._undistorter is not None)  # topics have no order: the lens first
+    assert probe.spin_until(lambda: node._read_camera_info.undistorter is not None)  # the lens first
     send_epoch(probe, scene.sun, stamp(0))
     probe.wait_status(lambda lvl, msg, v: v.get("sun_epoch_ns") == str(stamp(0)))
     probe.publish("image", image_msg(scene, 1, lens_frame(scene, 1)[0]))

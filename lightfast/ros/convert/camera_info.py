@@ -91,7 +91,11 @@ def undistorter_from_camera_info(msg: Any) -> Undistorter | None:
     """The :class:`~lightfast.camera.Undistorter` of a ``CameraInfo`` whose ``D`` is not all zero (None if it is),
     mapping its images to the pinhole camera of :func:`camera_from_camera_info` (``undistort=True``).
     :class:`CameraInfoError` for a model it cannot invert or a wrong number of coefficients."""
-    camera = camera_from_camera_info(msg, undistort=True)
+    return _undistorter(camera_from_camera_info(msg, undistort=True), msg)
+
+
+def _undistorter(camera: PinholeCamera, msg: Any) -> Undistorter | None:
+    """:func:`undistorter_from_camera_info` for ``msg`` whose ``camera`` is already converted."""
     d = np.asarray(msg.d, dtype=np.float64).reshape(-1)
     if not np.any(d != 0.0):
         return None
@@ -121,7 +125,7 @@ class CameraInfoReader:
                None if roi is None else (roi.x_offset, roi.y_offset, roi.width, roi.height))
         if key != self._key or self._camera is None:
             camera = camera_from_camera_info(msg, undistort=self._undistort)  # raises before the key is kept
-            self.undistorter = undistorter_from_camera_info(msg) if self._undistort else None
+            self.undistorter = _undistorter(camera, msg) if self._undistort else None
             self._camera, self._key = camera, key
         return self._camera
 
